@@ -1,0 +1,274 @@
+"""Closed-form leg inverse kinematics and vectorized forward kinematics.
+
+Notation (Drake-style monograms): ``p_WB`` position of frame B in world W [m], ``R_WB``
+rotation of B in W (maps B coordinates to W). Frames: world W, trunk/pelvis B (the
+``trunk`` body frame, origin midway between the hip joints), sole S of a foot (the
+``{s}_sole`` site: sole centre on the sole plane, foot axes).
+
+Every function is vectorized over time: positions have shape (T, 3), rotations
+(T, 3, 3), joint angles (T, 6) for one leg or (T, 12) for both legs in
+:data:`~grfguard.model.robot.JOINT_NAMES` order. A single pose (3,) / (3, 3) is
+broadcast.
+
+The geometry comes from :func:`grfguard.model.mjcf.body_layout`, the same table the
+MJCF is built from, so FK here equals MuJoCo's ``mj_kinematics`` to rounding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grfguard.errors import ConfigError
+from grfguard.model.mjcf import body_layout
+from grfguard.model.robot import SIDES, RobotConfig
+
+__all__ = [
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "rotation_to_quat",
+    "quat_to_rotation",
+    "leg_ik",
+    "leg_fk",
+    "body_poses",
+    "center_of_mass",
+]
+
+
+def _angles(a: np.ndarray | float) -> np.ndarray:
+    return np.asarray(a, dtype=float)
+
+
+def rot_x(angle: np.ndarray | float) -> np.ndarray:
+    """Rotation matrices about x, shape ``angle.shape + (3, 3)``; angle in [rad]."""
+    a = _angles(angle)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
+
+
+def rot_y(angle: np.ndarray | float) -> np.ndarray:
+    """Rotation matrices about y, shape ``angle.shape + (3, 3)``; angle in [rad]."""
+    a = _angles(angle)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def rot_z(angle: np.ndarray | float) -> np.ndarray:
+    """Rotation matrices about z, shape ``angle.shape + (3, 3)``; angle in [rad]."""
+    a = _angles(angle)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _rot_axis(axis: tuple[float, float, float], angle: np.ndarray) -> np.ndarray:
+    if axis == (1.0, 0.0, 0.0):
+        return rot_x(angle)
+    if axis == (0.0, 1.0, 0.0):
+        return rot_y(angle)
+    if axis == (0.0, 0.0, 1.0):
+        return rot_z(angle)
+    raise ValueError(f"unsupported joint axis {axis}")  # pragma: no cover
+
+
+def quat_to_rotation(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrices from unit quaternions (w, x, y, z), shape (..., 4) -> (..., 3, 3)."""
+    q = np.asarray(quat_wxyz, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def rotation_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) with w >= 0 from rotation matrices (..., 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
+    w = 0.5 * np.sqrt(np.maximum(0.0, 1 + m00 + m11 + m22))
+    x = 0.5 * np.sqrt(np.maximum(0.0, 1 + m00 - m11 - m22))
+    y = 0.5 * np.sqrt(np.maximum(0.0, 1 - m00 + m11 - m22))
+    z = 0.5 * np.sqrt(np.maximum(0.0, 1 - m00 - m11 + m22))
+    x = np.copysign(x, R[..., 2, 1] - R[..., 1, 2])
+    y = np.copysign(y, R[..., 0, 2] - R[..., 2, 0])
+    z = np.copysign(z, R[..., 1, 0] - R[..., 0, 1])
+    q = np.stack([w, x, y, z], -1)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _check_side(side: str) -> None:
+    if side not in SIDES:
+        raise ConfigError(f"side must be one of {SIDES}, got {side!r}")
+
+
+def _as_traj(p: np.ndarray, R: np.ndarray, n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    p = np.asarray(p, dtype=float)
+    R = np.asarray(R, dtype=float)
+    p = p[None] if p.ndim == 1 else p
+    R = R[None] if R.ndim == 2 else R
+    t = max(p.shape[0], R.shape[0], n or 1)
+    return np.broadcast_to(p, (t, 3)), np.broadcast_to(R, (t, 3, 3))
+
+
+def _hip_offset_in_pelvis(robot: RobotConfig, side: str) -> np.ndarray:
+    return np.array([0.0, robot.hip_width / 2 if side == "l" else -robot.hip_width / 2, 0.0])
+
+
+def _ankle_in_sole(robot: RobotConfig) -> np.ndarray:
+    return np.array([robot.ankle_offset_x, 0.0, robot.sole_to_ankle])
+
+
+def leg_ik(
+    robot: RobotConfig,
+    side: str,
+    p_WB: np.ndarray,
+    R_WB: np.ndarray,
+    p_WS: np.ndarray,
+    R_WS: np.ndarray,
+) -> np.ndarray:
+    """Closed-form 6-DOF leg IK (Kajita et al.'s analytic solution, knee bent forward).
+
+    The three hip axes intersect at the hip joint and the two ankle axes at the ankle,
+    so with ``r = R_WS^T (p_WH - p_WA)`` (hip seen from the ankle, sole axes),
+    ``C = |r|``, thigh ``A`` and shank ``B``:
+
+    ``knee = acos((C^2 - A^2 - B^2) / (2AB))``,
+    ``ankle_roll = atan2(r_y, r_z)``,
+    ``ankle_pitch = -atan2(r_x, sign(r_z) sqrt(r_y^2 + r_z^2)) - asin(A sin(knee) / C)``,
+    and ``Rz(yaw) Rx(roll) Ry(pitch) = R_WB^T R_WS Rx(-ankle_roll) Ry(-(knee + ankle_pitch))``.
+
+    Unreachable targets (``C > A + B``) are clipped to a straight knee.
+
+    Args:
+        robot: The robot description.
+        side: ``"r"`` or ``"l"``.
+        p_WB: Pelvis (trunk body) position in world [m], (T, 3) or (3,).
+        R_WB: Pelvis orientation in world, (T, 3, 3) or (3, 3).
+        p_WS: Sole-centre position in world [m], (T, 3) or (3,).
+        R_WS: Sole orientation in world, (T, 3, 3) or (3, 3).
+
+    Returns:
+        Joint angles [rad], (T, 6): hip_yaw, hip_roll, hip_pitch, knee, ankle_pitch,
+        ankle_roll.
+    """
+    _check_side(side)
+    p_WB, R_WB = _as_traj(p_WB, R_WB)
+    p_WS, R_WS = _as_traj(p_WS, R_WS, p_WB.shape[0])
+    p_WB, R_WB = _as_traj(p_WB, R_WB, p_WS.shape[0])
+    a, b = robot.upper_leg_length, robot.lower_leg_length
+    p_WH = p_WB + R_WB @ _hip_offset_in_pelvis(robot, side)
+    p_WA = p_WS + R_WS @ _ankle_in_sole(robot)
+    r = np.einsum("tji,tj->ti", R_WS, p_WH - p_WA)
+    c = np.linalg.norm(r, axis=1)
+    cos_knee = np.clip((c**2 - a**2 - b**2) / (2 * a * b), -1.0, 1.0)
+    knee = np.arccos(cos_knee)
+    c_eff = np.minimum(c, a + b)
+    q_a = np.arcsin(np.clip(a * np.sin(knee) / c_eff, -1.0, 1.0))
+    ankle_roll = np.arctan2(r[:, 1], r[:, 2])
+    ankle_roll = np.where(ankle_roll > np.pi / 2, ankle_roll - np.pi, ankle_roll)
+    ankle_roll = np.where(ankle_roll < -np.pi / 2, ankle_roll + np.pi, ankle_roll)
+    ankle_pitch = (
+        -np.arctan2(r[:, 0], np.sign(r[:, 2]) * np.sqrt(r[:, 1] ** 2 + r[:, 2] ** 2)) - q_a
+    )
+    R = (
+        np.swapaxes(R_WB, 1, 2)
+        @ R_WS
+        @ rot_x(-ankle_roll)
+        @ rot_y(-(knee + ankle_pitch))
+    )
+    yaw = np.arctan2(-R[:, 0, 1], R[:, 1, 1])
+    cz, sz = np.cos(yaw), np.sin(yaw)
+    roll = np.arctan2(R[:, 2, 1], -R[:, 0, 1] * sz + R[:, 1, 1] * cz)
+    pitch = np.arctan2(-R[:, 2, 0], R[:, 2, 2])
+    return np.stack([yaw, roll, pitch, knee, ankle_pitch, ankle_roll], axis=1)
+
+
+def leg_fk(
+    robot: RobotConfig,
+    side: str,
+    p_WB: np.ndarray,
+    R_WB: np.ndarray,
+    q_leg: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sole pose of one leg from the pelvis pose and its 6 joint angles.
+
+    Args:
+        robot: The robot description.
+        side: ``"r"`` or ``"l"``.
+        p_WB: Pelvis position in world [m], (T, 3) or (3,).
+        R_WB: Pelvis orientation in world, (T, 3, 3) or (3, 3).
+        q_leg: Joint angles [rad], (T, 6) or (6,), order as :func:`leg_ik`.
+
+    Returns:
+        ``(p_WS, R_WS)``: sole-centre position (T, 3) [m] and orientation (T, 3, 3).
+    """
+    _check_side(side)
+    q = np.atleast_2d(np.asarray(q_leg, dtype=float))
+    p_WB, R_WB = _as_traj(p_WB, R_WB, q.shape[0])
+    a, b = robot.upper_leg_length, robot.lower_leg_length
+    p = p_WB + R_WB @ _hip_offset_in_pelvis(robot, side)
+    R = R_WB @ rot_z(q[:, 0]) @ rot_x(q[:, 1]) @ rot_y(q[:, 2])
+    p = p + R @ np.array([0.0, 0.0, -a])
+    R = R @ rot_y(q[:, 3])
+    p = p + R @ np.array([0.0, 0.0, -b])
+    R = R @ rot_y(q[:, 4]) @ rot_x(q[:, 5])
+    p = p - R @ _ankle_in_sole(robot)
+    return p, R
+
+
+def body_poses(
+    robot: RobotConfig, p_WB: np.ndarray, R_WB: np.ndarray, q: np.ndarray
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """World pose of every body (MuJoCo ``xpos``/``xmat`` equivalent), vectorized.
+
+    Args:
+        robot: The robot description.
+        p_WB: Trunk position in world [m], (T, 3) or (3,).
+        R_WB: Trunk orientation in world, (T, 3, 3) or (3, 3).
+        q: Joint angles [rad], (T, 12) or (12,), JOINT_NAMES order.
+
+    Returns:
+        Mapping body name -> (position (T, 3) [m], rotation (T, 3, 3)).
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if q.shape[1] != 12:
+        raise ConfigError(f"q must have 12 columns (JOINT_NAMES order), got shape {q.shape}")
+    p_WB, R_WB = _as_traj(p_WB, R_WB, q.shape[0])
+    from grfguard.model.robot import JOINT_NAMES
+
+    col = {j: i for i, j in enumerate(JOINT_NAMES)}
+    poses: dict[str, tuple[np.ndarray, np.ndarray]] = {"trunk": (p_WB, R_WB)}
+    for spec in body_layout(robot)[1:]:
+        pp, Rp = poses[spec.parent]
+        p = pp + Rp @ np.asarray(spec.pos_in_parent)
+        R = Rp @ _rot_axis(spec.axis, q[:, col[spec.joint]])
+        poses[spec.name] = (p, R)
+    return poses
+
+
+def center_of_mass(
+    robot: RobotConfig, p_WB: np.ndarray, R_WB: np.ndarray, q: np.ndarray
+) -> np.ndarray:
+    """Whole-body centre of mass in world [m], (T, 3) (MuJoCo ``subtree_com[trunk]``).
+
+    Args:
+        robot: The robot description.
+        p_WB: Trunk position in world [m], (T, 3) or (3,).
+        R_WB: Trunk orientation in world, (T, 3, 3) or (3, 3).
+        q: Joint angles [rad], (T, 12) or (12,), JOINT_NAMES order.
+    """
+    poses = body_poses(robot, p_WB, R_WB, q)
+    total = 0.0
+    acc = 0.0
+    for spec in body_layout(robot):
+        p, R = poses[spec.name]
+        acc = acc + spec.mass * (p + R @ np.asarray(spec.com_in_body))
+        total += spec.mass
+    return acc / total
