@@ -7,7 +7,16 @@ since when, and to hand back a recovered signal.
 
 from __future__ import annotations
 
-from grfguard.errors import ConfigError, GrfguardError, LogFormatError
+from typing import Any
+
+from grfguard.errors import (
+    ConfigError,
+    FaultSpecError,
+    GrfguardError,
+    LogFormatError,
+    SimulationError,
+)
+from grfguard.io.logio import load_log, read_log, write_log
 from grfguard.model.robot import SURALP, RobotConfig
 
 __version__ = "0.1.0"
@@ -17,6 +26,32 @@ __all__ = [
     "GrfguardError",
     "ConfigError",
     "LogFormatError",
+    "FaultSpecError",
+    "SimulationError",
     "RobotConfig",
     "SURALP",
+    "load_log",
+    "read_log",
+    "write_log",
+    "VirtualForceSensor",
+    "Monitor",
+    "simulate",
 ]
+
+# Heavier parts (MuJoCo, scipy) load on first use.
+_LAZY = {
+    "VirtualForceSensor": ("grfguard.estimate.vfs", "VirtualForceSensor"),
+    "Monitor": ("grfguard.detect.monitor", "Monitor"),
+    "simulate": ("grfguard.sim", "simulate"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        value = getattr(importlib.import_module(module), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'grfguard' has no attribute {name!r}")
