@@ -70,7 +70,7 @@ def robot_show(
     """Print the robot description as TOML (the SURALP default: copy and edit it)."""
     from grfguard.model.robot import load_robot
 
-    out.print(load_robot(robot).to_toml(), end="", highlight=False, markup=False)
+    sys.stdout.write(load_robot(robot).to_toml())
 
 
 # -------------------------------------------------------------------------- simulate
