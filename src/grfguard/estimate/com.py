@@ -1,0 +1,278 @@
+"""CoM and momentum estimators of the virtual force sensor.
+
+Two estimators, both producing the same quantities per sample: CoM ``c`` in world [m],
+CoM acceleration ``c_dd`` [m/s^2], centroidal angular momentum rate ``L_dot`` [N m],
+total ground force ``F = m (c_dd + g e_z)`` [N] and the ZMP ``p`` on the ground [m].
+
+* ``multibody`` (default, sensor-free): whole-body CoM and body poses from MuJoCo kinematics
+  (encoders + IMU attitude), trunk position from leg odometry anchored on a stance foot that
+  is flat on the ground (planned stance + kinematic corner heights, never the force
+  sensors), ``c_dd`` and ``L_dot`` by finite differences through a causal Butterworth
+  low-pass. Newton-Euler about the CoM with the ground force acting at the ZMP ``p`` (ground
+  height ``z_g``, ``h = c_z - z_g``)::
+
+      L_dot = (p - c) x F   =>   p_x = c_x - (h F_x + L_dot_y) / F_z
+                                 p_y = c_y - (h F_y - L_dot_x) / F_z
+
+* ``paper`` (eq. 1-5): LIPM Kalman filter per horizontal axis, state ``(c, c_d, c_dd)``,
+  process model the jerk form of the LIPM (eq. 2) ``c_ddd = g/z_c (c_d - p_d)`` with the
+  measured-ZMP rate ``p_d`` as input (eq. 3), measurements the IMU acceleration rotated to
+  world with gravity removed and - because eq. 2 alone leaves ``c`` unobservable - eq. 1
+  itself as a pseudo-measurement ``p_act = c - z_c/g c_dd``. The ZMP disturbance observer
+  low-passes ``p_err = p_ref - p_act`` (eq. 4) into a position correction ``Delta c``
+  (eq. 5: ``c_hat = c + Delta c``). The measured ZMP comes from the monitored force sensors,
+  so a faulty sensor corrupts this CoM (DESIGN.md item 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.signal import butter, lfilter, lfilter_zi
+
+__all__ = [
+    "CausalLowPass",
+    "LegOdometry",
+    "ZMP_EPS_N",
+    "zmp_from_momentum",
+    "PaperCoMFilter",
+    "lipm_kalman_matrices",
+]
+
+#: Smallest vertical force used as a divisor [N].
+ZMP_EPS_N = 1.0
+
+
+class CausalLowPass:
+    """Causal Butterworth low-pass on several channels, streaming and batch alike.
+
+    The state starts at steady state for the first input (no start-up transient).
+
+    Args:
+        cutoff_hz: Cut-off frequency [Hz].
+        dt_s: Sampling period [s].
+        order: Filter order.
+        n_channels: Number of channels filtered together.
+    """
+
+    def __init__(self, cutoff_hz: float, dt_s: float, order: int, n_channels: int) -> None:
+        b, a = butter(order, cutoff_hz, btype="low", fs=1.0 / dt_s)
+        self.b, self.a = np.asarray(b, float), np.asarray(a, float)
+        self.n_channels = n_channels
+        self._zi = lfilter_zi(self.b, self.a)
+        self._z: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the state."""
+        self._z = None
+
+    def update(self, x: np.ndarray) -> np.ndarray:
+        """Filter one sample ``x`` (n_channels,) (direct form II transposed)."""
+        x = np.asarray(x, float)
+        if self._z is None:
+            self._z = self._zi[:, None] * x[None, :]
+        y, self._z = lfilter(self.b, self.a, x[None, :], axis=0, zi=self._z)
+        return y[0]
+
+    def run(self, x: np.ndarray) -> np.ndarray:
+        """Filter a (T, n_channels) array from the current state (state is kept)."""
+        x = np.asarray(x, float)
+        if x.shape[0] == 0:
+            return x.copy()
+        if self._z is None:
+            self._z = self._zi[:, None] * x[0][None, :]
+        y, self._z = lfilter(self.b, self.a, x, axis=0, zi=self._z)
+        return y
+
+
+def zmp_from_momentum(
+    com_W: np.ndarray,
+    force_W: np.ndarray,
+    L_dot_W: np.ndarray,
+    ground_z: np.ndarray | float,
+) -> np.ndarray:
+    """ZMP on the ground plane from the CoM, total ground force and angular momentum rate.
+
+    Args:
+        com_W: (..., 3) CoM in world [m].
+        force_W: (..., 3) total ground reaction force ``m (c_dd + g e_z)`` [N].
+        L_dot_W: (..., 3) rate of the angular momentum about the CoM [N m].
+        ground_z: Ground height [m] (scalar or (...,)).
+
+    Returns:
+        (..., 2) ZMP ``p_x, p_y`` in world [m].
+    """
+    h = com_W[..., 2] - ground_z
+    fz = np.maximum(force_W[..., 2], ZMP_EPS_N)
+    px = com_W[..., 0] - (h * force_W[..., 0] + L_dot_W[..., 1]) / fz
+    py = com_W[..., 1] - (h * force_W[..., 1] - L_dot_W[..., 0]) / fz
+    return np.stack([px, py], axis=-1)
+
+
+class LegOdometry:
+    """Trunk position in world by leg odometry, anchored on a flat stance foot.
+
+    The anchor foot's sole centre is fixed in world while anchored. The anchor moves to the
+    other foot when that foot is planned in stance and flat on the ground (all its corners
+    within ``contact_height`` of the ground), or when the anchor foot leaves its planned
+    stance while the other one is in it. The switch is continuous: the new anchor's world
+    position is computed with the current trunk position. The ground height is the lowest
+    contact point of the anchor foot. At the first sample the mid-point of the planned
+    stance feet is put at ``x = y = 0`` and the ground at ``z = 0``.
+
+    Args:
+        contact_height: Corner height above the ground that still counts as touching [m].
+    """
+
+    def __init__(self, contact_height: float = 0.003) -> None:
+        self.contact_height = contact_height
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the anchor."""
+        self.anchor: int = -1
+        self.p_W_anchor = np.zeros(3)
+
+    def update(
+        self, p_AK: np.ndarray, p_AS: np.ndarray, stance: Sequence[bool]
+    ) -> tuple[np.ndarray, float, int]:
+        """One sample.
+
+        Args:
+            p_AK: (8, 3) contact points in frame A (trunk origin, world axes) [m].
+            p_AS: (2, 3) sole centres in A [m].
+            stance: planned stance of (right, left).
+
+        Returns:
+            ``(p_WT, ground_z, anchor)``: trunk position in world [m], ground height [m],
+            anchor foot index (0 right, 1 left).
+        """
+        st = [bool(stance[0]), bool(stance[1])]
+        if self.anchor < 0:
+            if st[0] and not st[1]:
+                self.anchor = 0
+            elif st[1] and not st[0]:
+                self.anchor = 1
+            else:
+                # both (or neither) planned: the lower foot, right on ties
+                self.anchor = int(p_AK[4:, 2].min() < p_AK[:4, 2].min() - 1e-4)
+            feet = [i for i in (0, 1) if st[i]] or [self.anchor]
+            mid = p_AS[feet].mean(axis=0)
+            z0 = p_AK[4 * self.anchor : 4 * self.anchor + 4, 2].min()
+            # trunk at (-mid_x, -mid_y, -z0): mid-point at the origin, anchor on z = 0
+            p_WT = np.array([-mid[0], -mid[1], -z0])
+            self.p_W_anchor = p_WT + p_AS[self.anchor]
+        a = self.anchor
+        p_WT = self.p_W_anchor - p_AS[a]
+        ground = p_WT[2] + p_AK[4 * a : 4 * a + 4, 2].min()
+        o = 1 - a
+        flat_other = p_WT[2] + p_AK[4 * o : 4 * o + 4, 2].max() - ground < self.contact_height
+        if st[o] and (flat_other or not st[a]):
+            self.anchor = o
+            self.p_W_anchor = p_WT + p_AS[o]
+        return p_WT, float(ground), a
+
+
+def lipm_kalman_matrices(
+    dt_s: float, z_c_m: float, gravity: float, jerk_psd: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Discrete LIPM jerk-form model of paper eq. 2 for state ``(c, c_d, c_dd)``.
+
+    ``x_k = A x_{k-1} + B p_d_{k-1} + w`` with ``c_ddd = (g/z_c)(c_d - p_d)``.
+
+    Args:
+        dt_s: Sampling period [s].
+        z_c_m: CoM height [m].
+        gravity: Gravity [m/s^2].
+        jerk_psd: White-jerk process noise spectral density [m^2/s^5].
+
+    Returns:
+        ``(A, B, Q)``: (3, 3), (3,), (3, 3).
+    """
+    t = dt_s
+    w2 = gravity / z_c_m
+    A = np.array([[1.0, t, 0.5 * t * t], [0.0, 1.0, t], [0.0, t * w2, 1.0]])
+    B = np.array([0.0, 0.0, -t * w2])
+    Q = jerk_psd * np.array(
+        [[t**5 / 20, t**4 / 8, t**3 / 6], [t**4 / 8, t**3 / 3, t**2 / 2], [t**3 / 6, t**2 / 2, t]]
+    )
+    return A, B, Q
+
+
+class PaperCoMFilter:
+    """The paper's CoM estimator (eq. 1-5), both horizontal axes, one sample at a time.
+
+    Args:
+        dt_s: Sampling period [s].
+        z_c_m: LIPM CoM height [m].
+        gravity: Gravity [m/s^2].
+        jerk_psd: Process noise spectral density [m^2/s^5].
+        acc_var: Accelerometer noise variance [(m/s^2)^2].
+        zmp_var: Variance of the measured ZMP used in the eq. 1 pseudo-measurement [m^2].
+        dob_time_constant_s: Time constant of the ZMP disturbance observer low-pass [s].
+        dob_gain: Gain from the filtered ZMP error to ``Delta c`` (eq. 5).
+    """
+
+    def __init__(
+        self,
+        dt_s: float,
+        z_c_m: float,
+        gravity: float,
+        jerk_psd: float,
+        acc_var: float,
+        zmp_var: float = 0.005**2,
+        dob_time_constant_s: float = 0.5,
+        dob_gain: float = 1.0,
+    ) -> None:
+        self.dt = dt_s
+        self.z_c = z_c_m
+        self.g = gravity
+        self.A, self.B, self.Q = lipm_kalman_matrices(dt_s, z_c_m, gravity, jerk_psd)
+        self.H = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, -z_c_m / gravity]])
+        self.R = np.diag([acc_var, zmp_var])
+        self.k_dob = dt_s / (dob_time_constant_s + dt_s)
+        self.dob_gain = dob_gain
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state."""
+        self.x: np.ndarray | None = None  # (3, 2): state per axis in columns
+        self.P = np.diag([1e-4, 1e-2, 1.0])
+        self.p_prev = np.zeros(2)
+        self.dc = np.zeros(2)
+
+    def update(
+        self, p_act_W: np.ndarray, acc_W: np.ndarray, p_ref_W: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One sample.
+
+        Args:
+            p_act_W: (2,) measured ZMP from the force sensors [m].
+            acc_W: (2,) horizontal IMU acceleration in world, gravity removed [m/s^2].
+            p_ref_W: (2,) reference ZMP [m] or None (no disturbance observer).
+
+        Returns:
+            ``(c_hat, c_dd)``: corrected CoM (2,) [m] and CoM acceleration (2,) [m/s^2].
+        """
+        p_act = np.asarray(p_act_W, float)
+        if self.x is None:
+            self.x = np.zeros((3, 2))
+            self.x[0] = p_act
+            self.p_prev = p_act.copy()
+        p_dot = (p_act - self.p_prev) / self.dt
+        self.p_prev = p_act.copy()
+        # predict (same covariance for both axes)
+        x = self.A @ self.x + np.outer(self.B, p_dot)
+        P = self.A @ self.P @ self.A.T + self.Q
+        # correct with [acc; p_act]
+        S = self.H @ P @ self.H.T + self.R
+        K = P @ self.H.T @ np.linalg.inv(S)
+        y = np.stack([np.asarray(acc_W, float), p_act]) - self.H @ x
+        self.x = x + K @ y
+        self.P = (np.eye(3) - K @ self.H) @ P
+        if p_ref_W is not None and np.all(np.isfinite(p_ref_W)):
+            p_err = np.asarray(p_ref_W, float) - p_act
+            self.dc = self.dc + self.k_dob * (p_err - self.dc)
+        c_hat = self.x[0] + self.dob_gain * self.dc
+        return c_hat, self.x[2].copy()

@@ -1,0 +1,173 @@
+"""Configuration of the virtual force sensor (VFS): a frozen, validated dataclass.
+
+Every field carries its unit. Construct with keyword arguments, :meth:`VFSConfig.from_dict`
+or :meth:`VFSConfig.from_toml`; invalid values raise :class:`~grfguard.errors.ConfigError`
+with the name, the value and the allowed range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from grfguard.errors import ConfigError
+
+__all__ = ["VFSConfig", "COM_METHODS", "SPLIT_METHODS"]
+
+#: CoM / momentum estimators: ``multibody`` (sensor-free, default) or ``paper`` (LIPM KF + DOB).
+COM_METHODS: tuple[str, ...] = ("multibody", "paper")
+#: Force split: ``qp`` (one QP over all contact corners, default) or ``paper`` (eq. 6-12).
+SPLIT_METHODS: tuple[str, ...] = ("qp", "paper")
+
+
+def _num(name: str, value: Any, lo: float, hi: float, unit: str) -> None:
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        raise ConfigError(f"vfs.{name} must be a number, got {value!r}")
+    if not np.isfinite(value) or not (lo <= value <= hi):
+        raise ConfigError(
+            f"vfs.{name} = {value!r} {unit} is outside the allowed range [{lo}, {hi}] {unit}; "
+            "fix it in the [vfs] table of the config"
+        )
+
+
+@dataclass(frozen=True)
+class VFSConfig:
+    """Settings of :class:`grfguard.estimate.vfs.VirtualForceSensor`.
+
+    The defaults are the sensor-free multibody estimator with one QP over all corners in
+    contact (chosen by measured accuracy, see BENCHMARKS.md "Virtual force sensor").
+    ``VFSConfig.paper()`` gives the paper's method (LIPM Kalman filter, alpha split,
+    eq. 10-12 read literally, ``W = 0.01``).
+    """
+
+    #: CoM estimator: ``multibody`` (encoders + IMU attitude + model; never reads the force
+    #: sensors) or ``paper`` (LIPM Kalman filter fed by the measured ZMP, eq. 1-5).
+    com_method: str = "multibody"
+    #: Leg split and CoP: ``qp`` (single support: all on the stance foot; double support:
+    #: one QP over all corners) or ``paper`` (alpha rule eq. 6-9 and eq. 10-12 literally).
+    split_method: str = "qp"
+    #: Diagonal weight ``w`` of the contact-point QP ``|C N - d|^2 + w |N|^2`` in [m^2]
+    #: (the paper uses 0.01, which biases the CoP toward the sole centre).
+    qp_weight: float = 1e-6
+    #: Cut-off of the causal Butterworth low-pass on the CoM and angular momentum before
+    #: differentiation in [Hz] (higher lets attitude jitter through).
+    filter_cutoff: float = 15.0
+    #: Order of that Butterworth filter.
+    filter_order: int = 2
+    #: Sampling period in [s] (taken from the log when it has a ``time`` column).
+    dt: float = 0.001
+    #: Include the centroidal angular momentum rate in the ZMP (multibody only).
+    use_angular_momentum: bool = True
+    #: Corner height above the ground plane below which a corner counts as touching, in [m]
+    #: (kinematic contact; heel-first landing and toe-off).
+    contact_height: float = 0.003
+    #: Use the kinematic corner heights to drop lifted corners of a planned-stance foot.
+    kinematic_contact: bool = True
+    # ------------------------------------------------------------------ paper CoM filter
+    #: LIPM CoM height ``z_c`` in [m] for the paper's filter; 0 means "from the model
+    #: at the first sample".
+    lipm_height: float = 0.0
+    #: Process noise (jerk) spectral density of the paper's Kalman filter in [m^2/s^5].
+    paper_process_noise: float = 1e2
+    #: Accelerometer noise variance of the paper's Kalman filter in [(m/s^2)^2].
+    paper_measurement_noise: float = 0.05**2
+    #: Time constant of the ZMP disturbance observer in [s] (paper eq. 4-5).
+    paper_dob_time_constant: float = 0.5
+    #: ``c_y,max`` of eq. 7 in [m]: lateral CoM excursion that puts all load on one foot;
+    #: 0 means "half the distance between the feet from the model".
+    paper_cy_max: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.com_method not in COM_METHODS:
+            raise ConfigError(
+                f"vfs.com_method = {self.com_method!r} is unknown; use one of {list(COM_METHODS)}"
+            )
+        if self.split_method not in SPLIT_METHODS:
+            raise ConfigError(
+                f"vfs.split_method = {self.split_method!r} is unknown; "
+                f"use one of {list(SPLIT_METHODS)}"
+            )
+        _num("qp_weight", self.qp_weight, 1e-12, 1.0, "m^2")
+        _num("dt", self.dt, 1e-5, 0.1, "s")
+        _num("filter_cutoff", self.filter_cutoff, 0.1, 0.45 / self.dt, "Hz")
+        if not isinstance(self.filter_order, int) or not 1 <= self.filter_order <= 8:
+            raise ConfigError(
+                f"vfs.filter_order = {self.filter_order!r} must be an integer in [1, 8]"
+            )
+        for flag in ("use_angular_momentum", "kinematic_contact"):
+            if not isinstance(getattr(self, flag), bool):
+                raise ConfigError(f"vfs.{flag} must be true or false, got {getattr(self, flag)!r}")
+        _num("contact_height", self.contact_height, 0.0, 0.1, "m")
+        _num("lipm_height", self.lipm_height, 0.0, 5.0, "m")
+        _num("paper_process_noise", self.paper_process_noise, 1e-12, 1e12, "m^2/s^5")
+        _num("paper_measurement_noise", self.paper_measurement_noise, 1e-12, 1e6, "(m/s^2)^2")
+        _num("paper_dob_time_constant", self.paper_dob_time_constant, 1e-3, 1e3, "s")
+        _num("paper_cy_max", self.paper_cy_max, 0.0, 2.0, "m")
+
+    # ------------------------------------------------------------------ presets
+    @classmethod
+    def paper(cls, **overrides: Any) -> VFSConfig:
+        """The paper's method: LIPM CoM filter, alpha split, eq. 10-12, ``W = 0.01``."""
+        kw: dict[str, Any] = {
+            "com_method": "paper",
+            "split_method": "paper",
+            "qp_weight": 0.01,
+            "kinematic_contact": False,
+        }
+        kw.update(overrides)
+        return cls(**kw)
+
+    def replace(self, **changes: Any) -> VFSConfig:
+        """A copy with ``changes`` applied (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    # ------------------------------------------------------------------ round trip
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict of the settings."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> VFSConfig:
+        """Build from a dict (a ``vfs`` sub-table is accepted); unknown keys are rejected."""
+        if "vfs" in data and isinstance(data["vfs"], dict):
+            data = data["vfs"]
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(f"unknown vfs key(s) {unknown}; known keys: {sorted(known)}")
+        return cls(**data)
+
+    def to_toml(self) -> str:
+        """TOML text with a ``[vfs]`` table."""
+        lines = ["# grfguard virtual force sensor settings (SI units)", "[vfs]"]
+        for key, value in self.to_dict().items():
+            if isinstance(value, bool):
+                txt = "true" if value else "false"
+            elif isinstance(value, str):
+                txt = '"' + value + '"'
+            else:
+                txt = repr(value)
+            lines.append(f"{key} = {txt}")
+        return "\n".join(lines) + "\n"
+
+    @classmethod
+    def from_toml(cls, text_or_path: str | Path) -> VFSConfig:
+        """Parse TOML text or a ``.toml`` file."""
+        s = str(text_or_path)
+        if not s.lstrip().startswith(("[", "#")) and (s.endswith(".toml") or Path(s).exists()):
+            p = Path(s)
+            if not p.exists():
+                raise ConfigError(f"vfs config file {p} does not exist")
+            s, where = p.read_text(), str(p)
+        else:
+            where = "<string>"
+        try:
+            data = tomllib.loads(s)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{where} is not valid TOML: {exc}") from exc
+        return cls.from_dict(data)

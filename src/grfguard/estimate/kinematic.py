@@ -1,0 +1,235 @@
+"""Sensor-free kinematics for the virtual force sensor: whole-body CoM, body poses, contact points.
+
+Everything here reads only the joint encoders and the IMU attitude (never the force
+sensors). The free-floating base is put at the origin with the IMU attitude, so every
+position is expressed in a frame ``A`` with world orientation and origin at the trunk
+(``p_A* = p_W* - p_WT``). The trunk position in world comes later from leg odometry
+(:mod:`grfguard.estimate.com`).
+
+Notation: ``p_AC`` CoM in frame A [m]; ``p_AK`` contact points (lowest point of each corner
+sphere) in A [m]; ``R_WB`` body rotations (A and W share their orientation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from grfguard.errors import ConfigError
+from grfguard.model.robot import JOINT_NAMES, SIDES, RobotConfig
+
+__all__ = ["KinematicModel", "KinematicFrames", "angular_momentum_about_com", "quat_to_matrix"]
+
+
+def quat_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrices from unit quaternions.
+
+    Args:
+        quat_wxyz: (..., 4) quaternions ``w, x, y, z`` (normalized here).
+
+    Returns:
+        (..., 3, 3) rotation matrices.
+    """
+    q = np.asarray(quat_wxyz, float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    r = np.empty(q.shape[:-1] + (3, 3))
+    r[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    r[..., 0, 1] = 2 * (x * y - w * z)
+    r[..., 0, 2] = 2 * (x * z + w * y)
+    r[..., 1, 0] = 2 * (x * y + w * z)
+    r[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    r[..., 1, 2] = 2 * (y * z - w * x)
+    r[..., 2, 0] = 2 * (x * z - w * y)
+    r[..., 2, 1] = 2 * (y * z + w * x)
+    r[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+@dataclass
+class KinematicFrames:
+    """Kinematic quantities for ``T`` samples (or one sample without the leading axis).
+
+    Attributes:
+        p_AC: (T, 3) whole-body CoM in frame A [m].
+        p_AB: (T, nb, 3) body CoMs in A [m].
+        R_WB: (T, nb, 3, 3) body inertia-frame rotations.
+        p_AK: (T, 8, 3) lowest point of each corner sphere in A [m], order r1..r4, l1..l4.
+        p_AS: (T, 2, 3) sole-centre sites in A [m], right then left.
+        R_WS: (T, 2, 3, 3) sole frame rotations.
+    """
+
+    p_AC: np.ndarray
+    p_AB: np.ndarray
+    R_WB: np.ndarray
+    p_AK: np.ndarray
+    p_AS: np.ndarray
+    R_WS: np.ndarray
+
+
+class KinematicModel:
+    """MuJoCo kinematics of the robot, driven by encoders and the IMU attitude.
+
+    Args:
+        robot: Robot description; the model comes from ``grfguard.model.mjcf.build_model``.
+        model: Optional prebuilt ``mujoco.MjModel`` following the naming contract.
+    """
+
+    def __init__(self, robot: RobotConfig, model: mujoco.MjModel | None = None) -> None:
+        if model is None:
+            from grfguard.model.mjcf import build_model
+
+            model = build_model(robot)
+        self.robot = robot
+        self.model = model
+        self.data = mujoco.MjData(model)
+        m = model
+
+        def _id(kind: mujoco.mjtObj, name: str) -> int:
+            i = mujoco.mj_name2id(m, kind, name)
+            if i < 0:
+                raise ConfigError(
+                    f"robot model has no {kind.name.lower()} named {name!r}; the MJCF must "
+                    "follow the grfguard naming contract (grfguard.model.mjcf)"
+                )
+            return int(i)
+
+        self.trunk_id = _id(mujoco.mjtObj.mjOBJ_BODY, "trunk")
+        root = _id(mujoco.mjtObj.mjOBJ_JOINT, "root")
+        self.root_qadr = int(m.jnt_qposadr[root])
+        self.joint_qadr = np.array(
+            [m.jnt_qposadr[_id(mujoco.mjtObj.mjOBJ_JOINT, j)] for j in JOINT_NAMES], dtype=int
+        )
+        imu = _id(mujoco.mjtObj.mjOBJ_SITE, "imu")
+        if int(m.site_bodyid[imu]) != self.trunk_id:
+            raise ConfigError("the `imu` site must sit on the `trunk` body")
+        #: Rotation of the IMU site in the trunk frame.
+        self.R_TI = quat_to_matrix(np.array(m.site_quat[imu]))
+        self.corner_sites = np.array(
+            [_id(mujoco.mjtObj.mjOBJ_SITE, f"{s}{k}") for s in SIDES for k in range(1, 5)],
+            dtype=int,
+        )
+        self.sole_sites = np.array([_id(mujoco.mjtObj.mjOBJ_SITE, f"{s}_sole") for s in SIDES])
+        radius = []
+        for s in SIDES:
+            for k in range(1, 5):
+                g = _id(mujoco.mjtObj.mjOBJ_GEOM, f"{s}{k}_contact")
+                radius.append(float(m.geom_size[g][0]))
+        self.corner_radius = np.array(radius)
+        #: Robot bodies (every body below the world body).
+        self.body_ids = np.arange(1, m.nbody, dtype=int)
+        self.body_mass = np.array(m.body_mass[1:], float)
+        self.body_inertia = np.array(m.body_inertia[1:], float)
+        self.mass = float(self.body_mass.sum())
+
+    # ------------------------------------------------------------------ one sample
+    def trunk_rotation(self, quat_imu_wxyz: np.ndarray) -> np.ndarray:
+        """Trunk rotation ``R_WT`` from the IMU attitude ``R_WI`` (``R_WT = R_WI R_TI^T``)."""
+        return quat_to_matrix(quat_imu_wxyz) @ self.R_TI.T
+
+    def forward(self, q_rad: np.ndarray, quat_imu_wxyz: np.ndarray) -> KinematicFrames:
+        """Kinematics of one sample.
+
+        Args:
+            q_rad: (12,) joint angles in JOINT_NAMES order [rad].
+            quat_imu_wxyz: (4,) IMU attitude in world.
+
+        Returns:
+            :class:`KinematicFrames` without the time axis.
+        """
+        m, d = self.model, self.data
+        R_WT = self.trunk_rotation(quat_imu_wxyz)
+        quat_t = np.empty(4)
+        mujoco.mju_mat2Quat(quat_t, R_WT.reshape(-1))
+        a = self.root_qadr
+        d.qpos[a : a + 3] = 0.0
+        d.qpos[a + 3 : a + 7] = quat_t
+        d.qpos[self.joint_qadr] = q_rad
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        p_AK = np.array(d.site_xpos[self.corner_sites])
+        p_AK[:, 2] -= self.corner_radius
+        return KinematicFrames(
+            p_AC=np.array(d.subtree_com[self.trunk_id]),
+            p_AB=np.array(d.xipos[1:]),
+            R_WB=np.array(d.ximat[1:]).reshape(-1, 3, 3),
+            p_AK=p_AK,
+            p_AS=np.array(d.site_xpos[self.sole_sites]),
+            R_WS=np.array(d.site_xmat[self.sole_sites]).reshape(-1, 3, 3),
+        )
+
+    # ------------------------------------------------------------------ batch
+    def forward_batch(self, q_rad: np.ndarray, quat_imu_wxyz: np.ndarray) -> KinematicFrames:
+        """Kinematics of ``T`` samples (a loop over :meth:`forward`, 5-10 us per sample).
+
+        Args:
+            q_rad: (T, 12) joint angles [rad].
+            quat_imu_wxyz: (T, 4) IMU attitudes.
+        """
+        n = q_rad.shape[0]
+        nb = self.body_ids.size
+        out = KinematicFrames(
+            p_AC=np.empty((n, 3)),
+            p_AB=np.empty((n, nb, 3)),
+            R_WB=np.empty((n, nb, 3, 3)),
+            p_AK=np.empty((n, 8, 3)),
+            p_AS=np.empty((n, 2, 3)),
+            R_WS=np.empty((n, 2, 3, 3)),
+        )
+        for i in range(n):
+            f = self.forward(q_rad[i], quat_imu_wxyz[i])
+            out.p_AC[i] = f.p_AC
+            out.p_AB[i] = f.p_AB
+            out.R_WB[i] = f.R_WB
+            out.p_AK[i] = f.p_AK
+            out.p_AS[i] = f.p_AS
+            out.R_WS[i] = f.R_WS
+        return out
+
+
+def angular_momentum_about_com(
+    p_AB: np.ndarray,
+    R_WB: np.ndarray,
+    p_AB_prev: np.ndarray,
+    R_WB_prev: np.ndarray,
+    body_mass_kg: np.ndarray,
+    body_inertia: np.ndarray,
+    dt_s: float,
+) -> np.ndarray:
+    """Centroidal angular momentum from two consecutive body poses (backward differences).
+
+    ``L = sum_i m_i (p_i - c) x v_i + R_i I_i R_i^T w_i`` with ``v_i = (p_i - p_i') / dt`` and
+    ``w_i = vee(R_i R_i'^T - R_i' R_i^T) / (2 dt)``. A common translation of every body (the
+    unknown trunk position) cancels, so positions in frame A suffice.
+
+    Args:
+        p_AB: (..., nb, 3) body CoM positions now [m].
+        R_WB: (..., nb, 3, 3) body rotations now.
+        p_AB_prev: same one sample earlier.
+        R_WB_prev: same one sample earlier.
+        body_mass_kg: (nb,) masses [kg].
+        body_inertia: (nb, 3) principal inertias [kg m^2].
+        dt_s: Sampling period [s].
+
+    Returns:
+        (..., 3) angular momentum about the CoM in world axes [kg m^2/s].
+    """
+    m = body_mass_kg[:, None]
+    c = (p_AB * m).sum(axis=-2, keepdims=True) / body_mass_kg.sum()
+    v = (p_AB - p_AB_prev) / dt_s
+    lin = (np.cross(p_AB - c, v) * m).sum(axis=-2)
+    dR = R_WB @ np.swapaxes(R_WB_prev, -1, -2)
+    w = np.stack(
+        [
+            dR[..., 2, 1] - dR[..., 1, 2],
+            dR[..., 0, 2] - dR[..., 2, 0],
+            dR[..., 1, 0] - dR[..., 0, 1],
+        ],
+        axis=-1,
+    ) / (2.0 * dt_s)
+    # I_W w = R diag(I) R^T w
+    w_B = np.einsum("...ji,...j->...i", R_WB, w)
+    rot = np.einsum("...ij,...j->...i", R_WB, w_B * body_inertia).sum(axis=-2)
+    return lin + rot
