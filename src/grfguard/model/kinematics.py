@@ -44,7 +44,8 @@ def rot_x(angle: np.ndarray | float) -> np.ndarray:
     a = _angles(angle)
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
+    rows = [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)]
+    return np.stack(rows, -2)
 
 
 def rot_y(angle: np.ndarray | float) -> np.ndarray:
@@ -52,7 +53,8 @@ def rot_y(angle: np.ndarray | float) -> np.ndarray:
     a = _angles(angle)
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+    rows = [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)]
+    return np.stack(rows, -2)
 
 
 def rot_z(angle: np.ndarray | float) -> np.ndarray:
@@ -60,7 +62,8 @@ def rot_z(angle: np.ndarray | float) -> np.ndarray:
     a = _angles(angle)
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+    rows = [np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)]
+    return np.stack(rows, -2)
 
 
 def _rot_axis(axis: tuple[float, float, float], angle: np.ndarray) -> np.ndarray:

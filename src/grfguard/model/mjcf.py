@@ -37,7 +37,6 @@ import functools
 from dataclasses import dataclass
 
 import mujoco
-import numpy as np
 
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINTS_PER_LEG, SIDES, RobotConfig
@@ -302,7 +301,8 @@ def build_mjcf(robot: RobotConfig) -> str:
         if base == "foot":
             side = spec.name[0]
             out = [
-                f'{ind}<geom type="box" size="{_v((robot.foot_length / 2, robot.foot_width / 2, h / 2 - rc))}" '
+                f'{ind}<geom type="box" '
+                f'size="{_v((robot.foot_length / 2, robot.foot_width / 2, h / 2 - rc))}" '
                 f'pos="{_v((-ax, 0.0, -h / 2 + rc))}" rgba="0.3 0.3 0.3 0.6" {vis}/>',
                 f'{ind}<site name="{side}_sole" pos="{_v((-ax, 0.0, -h))}" size="0.005"/>',
             ]
@@ -376,7 +376,8 @@ def build_mjcf(robot: RobotConfig) -> str:
     lines = [
         f'<mujoco model="{robot.name}">',
         '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="0.001" integrator="implicitfast" gravity="0 0 {_f(-robot.gravity)}"/>',
+        f'  <option timestep="0.001" integrator="implicitfast" '
+        f'gravity="0 0 {_f(-robot.gravity)}"/>',
         "  <worldbody>",
         f'    <geom name="ground" type="plane" size="{_f(50 * ground)} {_f(ground)} 0.1" '
         'contype="0" conaffinity="1" rgba="0.8 0.8 0.8 1"/>',

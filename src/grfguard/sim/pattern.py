@@ -1,0 +1,381 @@
+"""Walking pattern generation, vectorized over time.
+
+Pipeline: footstep plan -> piecewise-linear ZMP reference -> Kajita preview control on
+the cart-table model (CoM trajectory) -> swing-foot trajectories -> closed-form leg IK
+-> a few pelvis corrections so the multibody CoM (not the pelvis) follows the planned
+CoM -> joint references ``q_ref`` and rates ``qd_ref`` at 1 kHz.
+
+Frames: world W (x forward, y left, z up); feet flat, walking straight along +x, the
+pelvis upright. Positions in [m], times in [s], angles in [rad].
+
+Preview control (Kajita et al., ICRA 2003; Katayama's integral form): per horizontal
+axis the cart-table state ``x = (c, c', c'')`` with jerk input ``u`` and ZMP output
+``p = c - (z_c / g) c''``; with the augmented state ``(sum e, x)`` and
+``J = sum_k Q_e e_k^2 + R u_k^2`` the DARE gives
+``u_k = -G_i sum_{i<=k} e_i - G_x x_k - sum_{j=1}^{N} G_d(j) p_ref(k + j)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from grfguard.errors import ConfigError
+from grfguard.model.kinematics import center_of_mass, leg_ik
+from grfguard.model.robot import SIDES, RobotConfig
+from grfguard.sim.config import GaitConfig
+
+__all__ = [
+    "SAMPLE_RATE",
+    "WalkPlan",
+    "default_com_height",
+    "default_swing_height",
+    "resolve_gait",
+    "preview_gains",
+    "preview_control",
+    "plan_walk",
+]
+
+#: Sample rate of the plan, the simulation and the log in [Hz].
+SAMPLE_RATE = 1000
+_DT = 1.0 / SAMPLE_RATE
+#: Hip-to-ankle distance as a fraction of thigh + shank in the nominal posture.
+_NOMINAL_LEG_EXTENSION = 0.88
+
+
+def default_com_height(robot: RobotConfig) -> float:
+    """Default planned CoM height [m]: pelvis lowered until hip-ankle = 88 % of the leg.
+
+    The feet stand flat under the hips; the CoM height of that posture (multibody
+    model) is returned.
+    """
+    z_pelvis = robot.sole_to_ankle + _NOMINAL_LEG_EXTENSION * (
+        robot.upper_leg_length + robot.lower_leg_length
+    )
+    p_WB = np.array([[robot.ankle_offset_x, 0.0, z_pelvis]])
+    q = _ik_both(robot, p_WB, _feet_under_hips(robot, 1, x=0.0))
+    return float(center_of_mass(robot, p_WB, np.eye(3), q)[0, 2])
+
+
+def default_swing_height(robot: RobotConfig) -> float:
+    """Default swing-foot height [m]: 6 % of the hip-to-sole length."""
+    return 0.06 * robot.leg_length
+
+
+def resolve_gait(robot: RobotConfig, gait: GaitConfig) -> GaitConfig:
+    """``gait`` with robot-dependent defaults (``com_height``, ``swing_height``) filled in.
+
+    Raises:
+        ConfigError: If the step is too long for the legs or the CoM too high.
+    """
+    import dataclasses
+
+    com_h = gait.com_height if gait.com_height is not None else default_com_height(robot)
+    swing_h = gait.swing_height if gait.swing_height is not None else default_swing_height(robot)
+    legs = robot.upper_leg_length + robot.lower_leg_length
+    if gait.step_length > 0.6 * legs:
+        raise ConfigError(
+            f"gait.step_length = {gait.step_length} m is too long for legs of "
+            f"{legs:.3f} m (thigh + shank); use at most {0.6 * legs:.3f} m"
+        )
+    if com_h > robot.leg_length + robot.trunk_com_height:
+        raise ConfigError(
+            f"gait.com_height = {com_h} m is above what straight legs reach "
+            f"({robot.leg_length + robot.trunk_com_height:.3f} m); lower it"
+        )
+    return dataclasses.replace(gait, com_height=float(com_h), swing_height=float(swing_h))
+
+
+@dataclass(frozen=True)
+class WalkPlan:
+    """The planned walk sampled at 1 kHz (T samples).
+
+    Attributes:
+        gait: The resolved gait (robot defaults filled in).
+        time: Sample times in [s], (T,).
+        zmp_ref: Reference ZMP in world [m], (T, 2).
+        contact_ref: Planned stance of (right, left) foot, 0/1 ints, (T, 2).
+        com_ref: Planned CoM in world [m], (T, 3).
+        com_vel_ref: Planned CoM velocity in world [m/s], (T, 3).
+        sole_pos: Planned sole-centre positions in world [m], (2, T, 3) (right, left).
+        pelvis_pos: Pelvis (trunk body) position in world [m], (T, 3); upright.
+        q_ref: Joint references [rad], (T, 12), JOINT_NAMES order.
+        qd_ref: Joint rate references [rad/s], (T, 12).
+        footsteps: Footprint (x, y) of each foot after each step [m], (2, n + 1, 2).
+        step_times: Start time of each step in [s], (n,).
+        com_model_error: Max |model CoM - planned CoM| after the corrections in [m].
+    """
+
+    gait: GaitConfig
+    time: np.ndarray
+    zmp_ref: np.ndarray
+    contact_ref: np.ndarray
+    com_ref: np.ndarray
+    com_vel_ref: np.ndarray
+    sole_pos: np.ndarray
+    pelvis_pos: np.ndarray
+    q_ref: np.ndarray
+    qd_ref: np.ndarray
+    footsteps: np.ndarray
+    step_times: np.ndarray
+    com_model_error: float
+
+
+def preview_gains(
+    dt: float, com_height: float, gravity: float, horizon: float,
+    q_e: float = 1.0, r_u: float = 1e-6,
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Gains of the cart-table preview controller.
+
+    Args:
+        dt: Controller period in [s].
+        com_height: Cart-table height z_c in [m].
+        gravity: g in [m/s^2].
+        horizon: Preview horizon in [s].
+        q_e: ZMP error weight.
+        r_u: Jerk weight.
+
+    Returns:
+        ``(G_i, G_x (3,), G_d (N,), A (3, 3), B (3,))``.
+    """
+    A = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    B = np.array([dt**3 / 6, dt * dt / 2, dt])
+    C = np.array([1.0, 0.0, -com_height / gravity])
+    At = np.zeros((4, 4))
+    At[0, 0] = 1.0
+    At[0, 1:] = C @ A
+    At[1:, 1:] = A
+    Bt = np.concatenate([[C @ B], B])[:, None]
+    Qt = np.zeros((4, 4))
+    Qt[0, 0] = q_e
+    Rm = np.array([[r_u]])
+    P = scipy.linalg.solve_discrete_are(At, Bt, Qt, Rm)
+    S = float(r_u + (Bt.T @ P @ Bt).item())
+    K = (Bt.T @ P @ At / S).ravel()
+    g_i, g_x = K[0], K[1:]
+    Ac = At - Bt @ K[None, :]
+    n = int(round(horizon / dt))
+    g_d = np.empty(n)
+    X = -Ac.T @ P @ np.array([1.0, 0.0, 0.0, 0.0])
+    g_d[0] = -g_i
+    for j in range(1, n):
+        g_d[j] = float(Bt[:, 0] @ X) / S
+        X = Ac.T @ X
+    return float(g_i), g_x, g_d, A, B
+
+
+def preview_control(
+    zmp_ref: np.ndarray, dt: float, com_height: float, gravity: float, horizon: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """CoM trajectory tracking a ZMP reference with preview control.
+
+    Args:
+        zmp_ref: ZMP reference sampled every ``dt``, (K, d) [m] (d axes, e.g. x and y).
+            The last value is held beyond the end for the preview.
+        dt: Controller period in [s].
+        com_height: Cart-table height in [m].
+        gravity: g in [m/s^2].
+        horizon: Preview horizon in [s].
+
+    Returns:
+        ``(states, jerk)``: CoM (position, velocity, acceleration) at each sample,
+        (K, 3, d), and the jerk input held over each period, (K, d).
+    """
+    g_i, g_x, g_d, A, B = preview_gains(dt, com_height, gravity, horizon)
+    p = np.asarray(zmp_ref, dtype=float)
+    k_n, d = p.shape
+    n = g_d.size
+    pad = np.concatenate([p, np.repeat(p[-1:], n, axis=0)], axis=0)
+    # f_k = sum_{j=1..n} G_d(j) p_ref(k + j), for every k at once
+    win = np.lib.stride_tricks.sliding_window_view(pad[1:], n, axis=0)  # (K, d, n)
+    f = win[:k_n] @ g_d  # (K, d)
+    cz = com_height / gravity
+    x = np.zeros((3, d))
+    x[0] = p[0]
+    states = np.empty((k_n, 3, d))
+    jerk = np.empty((k_n, d))
+    a = A.tolist()
+    b = B.tolist()
+    gx0, gx1, gx2 = (float(v) for v in g_x)
+    for ax in range(d):
+        c0, c1, c2 = float(x[0, ax]), float(x[1, ax]), float(x[2, ax])
+        esum = 0.0
+        pr = p[:, ax].tolist()
+        fa = f[:, ax].tolist()
+        out = np.empty((k_n, 3))
+        uo = np.empty(k_n)
+        for k in range(k_n):
+            esum += c0 - cz * c2 - pr[k]
+            u = -g_i * esum - gx0 * c0 - gx1 * c1 - gx2 * c2 - fa[k]
+            out[k, 0], out[k, 1], out[k, 2] = c0, c1, c2
+            uo[k] = u
+            c0, c1, c2 = (
+                c0 + a[0][1] * c1 + a[0][2] * c2 + b[0] * u,
+                c1 + a[1][2] * c2 + b[1] * u,
+                c2 + b[2] * u,
+            )
+        states[:, :, ax] = out
+        jerk[:, ax] = uo
+    return states, jerk
+
+
+def _feet_under_hips(robot: RobotConfig, n: int, x: float) -> np.ndarray:
+    """(2, n, 3) sole positions, flat on the ground under the hips."""
+    feet = np.zeros((2, n, 3))
+    for i, side in enumerate(SIDES):
+        feet[i, :, 0] = x
+        feet[i, :, 1] = robot.hip_width / 2 if side == "l" else -robot.hip_width / 2
+    return feet
+
+
+def _ik_both(robot: RobotConfig, p_WB: np.ndarray, sole_pos: np.ndarray) -> np.ndarray:
+    eye = np.eye(3)
+    return np.hstack(
+        [leg_ik(robot, side, p_WB, eye, sole_pos[i], eye) for i, side in enumerate(SIDES)]
+    )
+
+
+def _smooth(s: np.ndarray) -> np.ndarray:
+    """Quintic 0 -> 1 with zero velocity and acceleration at both ends."""
+    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
+    """Plan a straight walk and its joint references at 1 kHz (vectorized).
+
+    Args:
+        robot: The robot description.
+        gait: The gait; robot defaults are filled in by :func:`resolve_gait`.
+
+    Returns:
+        The :class:`WalkPlan`.
+
+    Raises:
+        ConfigError: If the gait does not fit the robot (e.g. unreachable footholds).
+    """
+    gait = resolve_gait(robot, gait)
+    g = robot.gravity
+    zc = float(gait.com_height)
+    n_t = int(round(gait.duration * SAMPLE_RATE))
+    t = np.arange(n_t) * _DT
+    n = gait.n_steps
+    T, Tds = gait.step_period, gait.double_support_time
+    ts = gait.start_time
+    L = gait.step_length
+    half_w = robot.hip_width / 2
+
+    # ---- footprints: footsteps[i, j] = foot i (0 right, 1 left) after step j
+    footsteps = np.zeros((2, n + 1, 2))
+    footsteps[0, :, 1] = -half_w
+    footsteps[1, :, 1] = half_w
+    swing = np.empty(n, dtype=int)  # index of the swinging foot in each step (1-based j)
+    for j in range(1, n + 1):
+        sw = 1 if j % 2 == 1 else 0  # left swings first
+        swing[j - 1] = sw
+        footsteps[:, j, 0] = footsteps[:, j - 1, 0]
+        footsteps[sw, j, 0] = (j - 1) * L if j == n else j * L
+    step_times = ts + np.arange(n) * T
+
+    # ---- ZMP reference knots (piecewise linear)
+    mid0 = footsteps[:, 0].mean(axis=0)
+    kt = [0.0, ts]
+    kp = [mid0, mid0]
+    for j in range(1, n + 1):
+        sup = 1 - swing[j - 1]
+        kt += [ts + (j - 1) * T + Tds, ts + j * T]
+        kp += [footsteps[sup, j - 1], footsteps[sup, j - 1]]
+    t_end = ts + n * T
+    mid_end = footsteps[:, n].mean(axis=0)
+    kt += [t_end + Tds, gait.duration + gait.preview_horizon + 1.0]
+    kp += [mid_end, mid_end]
+    kt_a = np.asarray(kt)
+    kp_a = np.asarray(kp)
+    zmp = np.column_stack([np.interp(t, kt_a, kp_a[:, 0]), np.interp(t, kt_a, kp_a[:, 1])])
+
+    # ---- preview control on its own grid, then exact (constant-jerk) 1 kHz resampling
+    dtp = gait.preview_dt
+    sub = int(round(dtp / _DT))
+    n_p = (n_t + sub - 1) // sub + 1
+    tp = np.arange(n_p) * dtp
+    zmp_p = np.column_stack([np.interp(tp, kt_a, kp_a[:, 0]), np.interp(tp, kt_a, kp_a[:, 1])])
+    states, jerk = preview_control(zmp_p, dtp, zc, g, gait.preview_horizon)
+    k = np.arange(n_t) // sub
+    tau = (t - k * dtp)[:, None]
+    c0, c1, c2, u = states[k, 0], states[k, 1], states[k, 2], jerk[k]
+    com_xy = c0 + c1 * tau + c2 * tau**2 / 2 + u * tau**3 / 6
+    vel_xy = c1 + c2 * tau + u * tau**2 / 2
+    com_ref = np.column_stack([com_xy, np.full(n_t, zc)])
+    com_vel_ref = np.column_stack([vel_xy, np.zeros(n_t)])
+
+    # ---- feet: step index j(t) in 1..n and single-support phase s in [0, 1]
+    sole = np.zeros((2, n_t, 3))
+    contact = np.ones((n_t, 2), dtype=np.int8)
+    if n > 0:
+        j_idx = np.clip(np.floor((t - ts) / T).astype(int) + 1, 1, n)
+        t_ss0 = ts + (j_idx - 1) * T + Tds
+        s = np.clip((t - t_ss0) / (T - Tds), 0.0, 1.0)
+        s = np.where(t < ts, 0.0, s)
+        s_h = _smooth(np.clip((s - 0.1) / 0.8, 0.0, 1.0))
+        bump = 64.0 * s**3 * (1.0 - s) ** 3
+        in_ss = (s > 0.0) & (s < 1.0)
+        for i in range(2):
+            a = footsteps[i, j_idx - 1]
+            b = footsteps[i, j_idx]
+            sole[i, :, :2] = a + (b - a) * s_h[:, None]
+            swinging = swing[j_idx - 1] == i
+            sole[i, :, 2] = np.where(swinging, gait.swing_height * bump, 0.0)
+            contact[:, i] = np.where(swinging & in_ss, 0, 1)
+    else:
+        sole[:, :, :2] = footsteps[:, 0][:, None, :]
+
+    # ---- pelvis: make the multibody CoM follow the plan
+    eye = np.eye(3)
+    pelvis = com_ref.copy()
+    q = _ik_both(robot, pelvis, sole)
+    pelvis = pelvis - (center_of_mass(robot, pelvis, eye, q) - pelvis)
+    for _ in range(gait.com_iterations):
+        q = _ik_both(robot, pelvis, sole)
+        err = com_ref - center_of_mass(robot, pelvis, eye, q)
+        pelvis = pelvis + err
+    q = _ik_both(robot, pelvis, sole)
+    com_err = float(np.abs(center_of_mass(robot, pelvis, eye, q) - com_ref).max())
+    reach = _reach_margin(robot, pelvis, sole)
+    if reach < 0.0:
+        i_bad = int(np.argmin(_reach_all(robot, pelvis, sole)))
+        raise ConfigError(
+            f"gait does not fit the robot: at t = {t[i_bad]:.3f} s a foot is out of reach "
+            f"by {-reach * 1000:.1f} mm; shorten step_length or lower com_height"
+        )
+    qd = np.gradient(q, _DT, axis=0)
+    return WalkPlan(
+        gait=gait,
+        time=t,
+        zmp_ref=zmp,
+        contact_ref=contact,
+        com_ref=com_ref,
+        com_vel_ref=com_vel_ref,
+        sole_pos=sole,
+        pelvis_pos=pelvis,
+        q_ref=q,
+        qd_ref=qd,
+        footsteps=footsteps,
+        step_times=step_times,
+        com_model_error=com_err,
+    )
+
+
+def _reach_all(robot: RobotConfig, pelvis: np.ndarray, sole: np.ndarray) -> np.ndarray:
+    legs = robot.upper_leg_length + robot.lower_leg_length
+    out = np.full(pelvis.shape[0], np.inf)
+    for i, side in enumerate(SIDES):
+        y = robot.hip_width / 2 if side == "l" else -robot.hip_width / 2
+        hip = pelvis + np.array([0.0, y, 0.0])
+        ankle = sole[i] + np.array([robot.ankle_offset_x, 0.0, robot.sole_to_ankle])
+        out = np.minimum(out, legs - np.linalg.norm(hip - ankle, axis=1))
+    return out
+
+
+def _reach_margin(robot: RobotConfig, pelvis: np.ndarray, sole: np.ndarray) -> float:
+    return float(_reach_all(robot, pelvis, sole).min())

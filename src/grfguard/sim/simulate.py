@@ -1,0 +1,355 @@
+"""Open-loop MuJoCo walking simulation that writes a log following the log contract.
+
+The planned joint references (:func:`grfguard.sim.pattern.plan_walk`) drive position
+servos, ``ctrl = q_ref + (kv / kp) qd_ref`` (MuJoCo's position ``kv`` damps toward zero
+velocity, so the feed-forward term gives velocity tracking). The physics runs with
+``mujoco.rollout`` in one-second chunks; every log row is read from ``sensordata`` of
+the same ``mj_forward`` (time ``k`` ms, before the step to ``k + 1`` ms).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import mujoco
+import numpy as np
+import pandas as pd
+from mujoco import rollout as mj_rollout
+
+from grfguard.errors import ConfigError, SimulationError
+from grfguard.model.kinematics import quat_to_rotation, rotation_to_quat
+from grfguard.model.mjcf import KV_OVER_KP, build_model
+from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, SIDES, SURALP, RobotConfig
+from grfguard.sim.config import GaitConfig, NoiseConfig
+from grfguard.sim.pattern import SAMPLE_RATE, WalkPlan, plan_walk
+
+__all__ = [
+    "SCENARIO",
+    "FALL_TILT_DEG",
+    "FALL_COM_FRACTION",
+    "EXTRA_TRUE_COLUMNS",
+    "simulate",
+    "run_physics",
+    "PhysicsResult",
+]
+
+#: Versioned scenario id written to ``df.attrs["scenario"]``.
+SCENARIO = "suralp-walk-v1"
+#: Trunk tilt from vertical that counts as a fall in [deg].
+FALL_TILT_DEG = 30.0
+#: The robot has fallen when the CoM drops below this fraction of the planned height.
+FALL_COM_FRACTION = 0.6
+#: Truth columns beyond the log contract's ``TRUE_COLUMNS``.
+EXTRA_TRUE_COLUMNS = (
+    "true_com_vel_x",
+    "true_com_vel_y",
+    "true_com_vel_z",
+    *(f"true_cop_{s}_{a}" for s in SIDES for a in "xy"),
+    *(f"true_sole_{s}_{a}" for s in SIDES for a in "xyz"),
+    *(f"true_sole_{s}_yaw" for s in SIDES),
+    "true_trunk_tilt",
+)
+_CHUNK = 1000  # physics steps per rollout call (1 s)
+
+
+class PhysicsResult:
+    """Raw sensordata of an open-loop run and a name -> column-slice index.
+
+    Attributes:
+        sensordata: (T, nsensordata) values, row k at time k ms.
+        index: Sensor name -> slice of columns.
+    """
+
+    def __init__(self, sensordata: np.ndarray, index: dict[str, slice]) -> None:
+        self.sensordata = sensordata
+        self.index = index
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.sensordata[:, self.index[name]]
+
+
+def _sensor_index(model: mujoco.MjModel) -> dict[str, slice]:
+    out = {}
+    for i in range(model.nsensor):
+        adr, dim = int(model.sensor_adr[i]), int(model.sensor_dim[i])
+        out[mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SENSOR, i)] = slice(adr, adr + dim)
+    return out
+
+
+def _tilt_deg(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Angle between the body z axis and world z in [deg]."""
+    x, y = quat_wxyz[:, 1], quat_wxyz[:, 2]
+    n2 = np.sum(quat_wxyz**2, axis=1)
+    cos_t = np.clip(1.0 - 2.0 * (x * x + y * y) / n2, -1.0, 1.0)
+    return np.degrees(np.arccos(cos_t))
+
+
+def run_physics(
+    robot: RobotConfig,
+    plan: WalkPlan,
+    progress: Callable[[float], Any] | None = None,
+    progress_offset: float = 0.0,
+    progress_scale: float = 1.0,
+) -> PhysicsResult:
+    """Roll the plan out open loop in MuJoCo and return the sensordata.
+
+    Args:
+        robot: The robot description.
+        plan: The walk plan (joint references at 1 kHz).
+        progress: Optional ``callable(fraction_done)``.
+        progress_offset: Fraction reported before the physics starts.
+        progress_scale: Fraction of the total the physics accounts for.
+
+    Returns:
+        The :class:`PhysicsResult`.
+
+    Raises:
+        SimulationError: If the robot falls (trunk tilt > 30 deg or CoM below 60 % of
+            the planned height); the message gives the time and the reason.
+    """
+    model = build_model(robot)
+    data = mujoco.MjData(model)
+    index = _sensor_index(model)
+    # actuator order = joint order of the model; map to JOINT_NAMES
+    act_cols = [JOINT_NAMES.index(model.actuator(i).name) for i in range(model.nu)]
+    ctrl = (plan.q_ref + KV_OVER_KP * plan.qd_ref)[:, act_cols]
+    # initial state: planned pose at rest
+    data.qpos[:3] = plan.pelvis_pos[0]
+    data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+    for i, name in enumerate(JOINT_NAMES):
+        data.qpos[model.jnt_qposadr[model.joint(name).id]] = plan.q_ref[0, i]
+    data.qvel[:] = 0.0
+    data.ctrl[:] = ctrl[0]
+    mujoco.mj_forward(model, data)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    n_t = plan.time.size
+    out = np.empty((n_t, model.nsensordata))
+    state = np.empty(mujoco.mj_stateSize(model, spec))
+    warm = np.zeros(model.nv)
+    tilt_sl, com_sl = index["truth_base_quat"], index["truth_com_pos"]
+    com_min = FALL_COM_FRACTION * float(plan.gait.com_height)
+    for k0 in range(0, n_t, _CHUNK):
+        k1 = min(n_t, k0 + _CHUNK)
+        mujoco.mj_getState(model, data, state, spec)
+        _, sens = mj_rollout.rollout(
+            model,
+            data,
+            initial_state=state[None],
+            control=ctrl[None, k0:k1],
+            initial_warmstart=warm[None],
+        )
+        out[k0:k1] = sens[0]
+        warm = data.qacc_warmstart.copy()
+        tilt = _tilt_deg(out[k0:k1, tilt_sl])
+        low = out[k0:k1, com_sl][:, 2] < com_min
+        bad = (tilt > FALL_TILT_DEG) | low
+        if bad.any():
+            i = int(np.argmax(bad))
+            t = plan.time[k0 + i]
+            reason = (
+                f"trunk tilt {tilt[i]:.1f} deg > {FALL_TILT_DEG} deg"
+                if tilt[i] > FALL_TILT_DEG
+                else f"CoM height {out[k0 + i, com_sl][2]:.3f} m < {com_min:.3f} m"
+            )
+            raise SimulationError(
+                f"robot {robot.name!r} fell at t = {t:.3f} s ({reason}) with gait "
+                f"{plan.gait.to_dict()}; try shorter or slower steps"
+            )
+        if progress is not None:
+            progress(progress_offset + progress_scale * k1 / n_t)
+    return PhysicsResult(out, index)
+
+
+def _small_rotation(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrices (T, 3, 3) of rotation vectors (T, 3) [rad] (Rodrigues)."""
+    theta = np.linalg.norm(rotvec, axis=1)
+    safe = np.where(theta > 0, theta, 1.0)
+    k = rotvec / safe[:, None]
+    K = np.zeros((rotvec.shape[0], 3, 3))
+    K[:, 0, 1], K[:, 0, 2] = -k[:, 2], k[:, 1]
+    K[:, 1, 0], K[:, 1, 2] = k[:, 2], -k[:, 0]
+    K[:, 2, 0], K[:, 2, 1] = -k[:, 1], k[:, 0]
+    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def _yaw(quat_wxyz: np.ndarray) -> np.ndarray:
+    w, x, y, z = (quat_wxyz[:, i] for i in range(4))
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def simulate(
+    robot: RobotConfig = SURALP,
+    gait: GaitConfig | None = None,
+    noise: NoiseConfig | None = None,
+    seed: int = 0,
+    progress: Callable[[float], Any] | None = None,
+) -> pd.DataFrame:
+    """Simulate an open-loop walk in MuJoCo and return a log-contract DataFrame.
+
+    Args:
+        robot: The robot description (default SURALP).
+        gait: The gait (default :class:`GaitConfig()`: 0.12 m steps, 1.0 s period,
+            20 % double support, 60 s).
+        noise: Sensor noise (default :class:`NoiseConfig()`; ``NoiseConfig.none()``
+            for clean data).
+        seed: Seed of ``numpy.random.default_rng`` for every noise draw.
+        progress: Optional ``callable(fraction_done)`` called with values in [0, 1].
+
+    Returns:
+        One row per 1 ms sample. Columns: ``time``, ``imu_acc_*`` (specific force, IMU
+        frame, +g up at rest) [m/s^2], ``imu_gyro_*`` [rad/s], ``imu_quat_w/x/y/z``,
+        ``q_<joint>`` [rad], ``zmp_ref_x/y`` [m], ``contact_ref_r/l`` (0/1),
+        ``force_<s>`` (noisy) [N], and truth ``true_force_<s>`` [N],
+        ``true_com_x/y/z`` [m], ``true_zmp_x/y`` [m] (CoP of all corner forces),
+        ``true_base_x/y/z`` [m], ``true_base_quat_w/x/y/z``, plus
+        :data:`EXTRA_TRUE_COLUMNS` (CoM velocity [m/s], per-foot CoP [m, NaN when the
+        foot carries < 1 N], sole positions [m] and yaw [rad], trunk tilt [deg]).
+        ``df.attrs`` holds ``robot``, ``gait`` (resolved), ``noise``, ``seed``,
+        ``sample_rate``, ``grfguard_version``, ``scenario``, ``n_steps``,
+        ``step_times``.
+
+    Raises:
+        SimulationError: If the robot falls (time and reason in the message).
+        ConfigError: If an argument has the wrong type or the gait does not fit.
+    """
+    from grfguard import __version__
+
+    gait = GaitConfig() if gait is None else gait
+    noise = NoiseConfig() if noise is None else noise
+    for name, val, typ in (
+        ("robot", robot, RobotConfig),
+        ("gait", gait, GaitConfig),
+        ("noise", noise, NoiseConfig),
+    ):
+        if not isinstance(val, typ):
+            raise ConfigError(
+                f"simulate({name}=...) needs a {typ.__name__}, got {type(val).__name__}"
+            )
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
+        raise ConfigError(f"simulate(seed=...) needs an integer, got {seed!r}")
+    if progress is not None:
+        progress(0.0)
+    plan = plan_walk(robot, gait)
+    if progress is not None:
+        progress(0.1)
+    phys = run_physics(robot, plan, progress, progress_offset=0.1, progress_scale=0.85)
+    cols = _log_columns(robot, plan, phys, noise, int(seed))
+    df = pd.DataFrame(cols)
+    df.attrs.update(
+        {
+            "robot": robot.to_dict(),
+            "gait": plan.gait.to_dict(),
+            "noise": noise.to_dict(),
+            "seed": int(seed),
+            "sample_rate": SAMPLE_RATE,
+            "grfguard_version": __version__,
+            "scenario": SCENARIO,
+            "n_steps": int(plan.gait.n_steps),
+            "step_times": [float(v) for v in plan.step_times],
+        }
+    )
+    if progress is not None:
+        progress(1.0)
+    return df
+
+
+def _log_columns(
+    robot: RobotConfig, plan: WalkPlan, phys: PhysicsResult, noise: NoiseConfig, seed: int
+) -> dict[str, np.ndarray]:
+    n_t = plan.time.size
+    rng = np.random.default_rng(seed)
+    cols: dict[str, np.ndarray] = {"time": np.round(plan.time, 9)}
+
+    # IMU: accelerometer and gyro with constant bias + white noise, attitude error
+    acc_bias = rng.normal(0.0, noise.acc_bias_sigma, 3) if noise.acc_bias_sigma > 0 else np.zeros(3)
+    gyro_bias = (
+        rng.normal(0.0, noise.gyro_bias_sigma, 3) if noise.gyro_bias_sigma > 0 else np.zeros(3)
+    )
+    att_bias = (
+        rng.normal(0.0, noise.attitude_bias_sigma, 3)
+        if noise.attitude_bias_sigma > 0
+        else np.zeros(3)
+    )
+    acc = phys["imu_acc"] + acc_bias
+    if noise.acc_sigma > 0:
+        acc = acc + rng.normal(0.0, noise.acc_sigma, (n_t, 3))
+    gyro = phys["imu_gyro"] + gyro_bias
+    if noise.gyro_sigma > 0:
+        gyro = gyro + rng.normal(0.0, noise.gyro_sigma, (n_t, 3))
+    quat = phys["imu_quat"].copy()
+    if noise.attitude_sigma > 0 or noise.attitude_bias_sigma > 0:
+        rv = np.broadcast_to(att_bias, (n_t, 3)).copy()
+        if noise.attitude_sigma > 0:
+            rv = rv + rng.normal(0.0, noise.attitude_sigma, (n_t, 3))
+        quat = rotation_to_quat(quat_to_rotation(quat) @ _small_rotation(rv))
+    quat = quat * np.where(quat[:, :1] < 0, -1.0, 1.0)
+    for i, a in enumerate("xyz"):
+        cols[f"imu_acc_{a}"] = acc[:, i]
+    for i, a in enumerate("xyz"):
+        cols[f"imu_gyro_{a}"] = gyro[:, i]
+    for i, a in enumerate("wxyz"):
+        cols[f"imu_quat_{a}"] = quat[:, i]
+
+    # encoders
+    res = 2 * np.pi / noise.encoder_counts_per_rev if noise.encoder_counts_per_rev else 0.0
+    for j in JOINT_NAMES:
+        q = phys[f"jointpos_{j}"][:, 0]
+        cols[f"q_{j}"] = np.round(q / res) * res if res else q.copy()
+
+    cols["zmp_ref_x"] = plan.zmp_ref[:, 0].copy()
+    cols["zmp_ref_y"] = plan.zmp_ref[:, 1].copy()
+    for i, s in enumerate(SIDES):
+        cols[f"contact_ref_{s}"] = plan.contact_ref[:, i].astype(np.int64)
+
+    true_force = {s: phys[f"touch_{s}"][:, 0] for s in SENSOR_NAMES}
+    force_noise = (
+        rng.normal(0.0, noise.force_sigma, (n_t, len(SENSOR_NAMES)))
+        if noise.force_sigma > 0
+        else np.zeros((n_t, len(SENSOR_NAMES)))
+    )
+    for k, s in enumerate(SENSOR_NAMES):
+        cols[f"force_{s}"] = true_force[s] + force_noise[:, k]
+    for s in SENSOR_NAMES:
+        cols[f"true_force_{s}"] = true_force[s].copy()
+
+    com = phys["truth_com_pos"]
+    for i, a in enumerate("xyz"):
+        cols[f"true_com_{a}"] = com[:, i].copy()
+    # ZMP on flat ground = CoP of the corner normal forces (contacts lie below the
+    # sphere centres, so the centres' xy are the contact points' xy)
+    f_all = np.column_stack([true_force[s] for s in SENSOR_NAMES])
+    p_all = np.stack([phys[f"truth_corner_{s}_pos"] for s in SENSOR_NAMES], axis=1)
+    total = f_all.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        zmp = np.einsum("tk,tka->ta", f_all, p_all[:, :, :2]) / total[:, None]
+    zmp[total < 1.0] = np.nan
+    cols["true_zmp_x"], cols["true_zmp_y"] = zmp[:, 0], zmp[:, 1]
+    base = phys["truth_base_pos"]
+    for i, a in enumerate("xyz"):
+        cols[f"true_base_{a}"] = base[:, i].copy()
+    bq = phys["truth_base_quat"]
+    bq = bq * np.where(bq[:, :1] < 0, -1.0, 1.0)
+    for i, a in enumerate("wxyz"):
+        cols[f"true_base_quat_{a}"] = bq[:, i].copy()
+
+    vel = phys["truth_com_vel"]
+    for i, a in enumerate("xyz"):
+        cols[f"true_com_vel_{a}"] = vel[:, i].copy()
+    for si, s in enumerate(SIDES):
+        f = f_all[:, 4 * si : 4 * si + 4]
+        p = p_all[:, 4 * si : 4 * si + 4, :2]
+        tot = f.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cop = np.einsum("tk,tka->ta", f, p) / tot[:, None]
+        cop[tot < 1.0] = np.nan
+        cols[f"true_cop_{s}_x"], cols[f"true_cop_{s}_y"] = cop[:, 0], cop[:, 1]
+    for s in SIDES:
+        sp = phys[f"truth_sole_{s}_pos"]
+        for i, a in enumerate("xyz"):
+            cols[f"true_sole_{s}_{a}"] = sp[:, i].copy()
+    for s in SIDES:
+        cols[f"true_sole_{s}_yaw"] = _yaw(phys[f"truth_sole_{s}_quat"])
+    cols["true_trunk_tilt"] = _tilt_deg(bq)
+    return cols
