@@ -1,0 +1,569 @@
+"""A standalone, offline HTML report of one ``grfguard run`` output.
+
+One file: plotly.js is inlined once (no CDN, no external fonts, no network), the
+figure data is one JSON block of base64 float32 typed arrays, and the page shows
+
+* the run's metadata (robot, gait, method, thresholds, ... from ``df.attrs``),
+* a per-sensor summary table (state, kind, size, delay, recovery error), see
+  :func:`grfguard.report.summary.sensor_summary`,
+* one interactive figure per sensor: forces (measured, VFS, recovered, truth) on
+  top, fault (estimated, true) and the detection flag below; planned stance of the
+  sensor's foot and injected fault windows shaded, alarm onsets as red dashed lines.
+
+Large logs: every trace is decimated for display to ``max_points`` buckets keeping
+each bucket's min and max (peaks survive), with full resolution within
+``focus_s`` [s] of every fault and alarm onset; 0/1 signals are stored exactly as
+change points. A 10-minute 1 kHz log gives a ~10 MB file (see BENCHMARKS.md).
+
+When the page has drawn every figure it sets ``window.grfguardReport.ready = true``
+(browser tests and benchmarks wait on it).
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import html as _html
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from grfguard.errors import ConfigError, LogFormatError
+from grfguard.report._decimate import minmax_indices, step_edges, window_mask
+from grfguard.report.style import (
+    ALARM_COLOR,
+    CONTACT_SHADE,
+    FAULT_SHADE,
+    SIGNAL_COLORS,
+    SIGNAL_LABELS,
+)
+from grfguard.report.summary import (
+    _time,
+    alarm_onsets,
+    detect_sensors,
+    fault_mask,
+    fault_onsets,
+    sensor_summary,
+)
+
+__all__ = ["write_html_report", "build_html_report", "sensor_figure_specs"]
+
+_SIDE_NAMES = {"r": "right", "l": "left"}
+_CORNER_NAMES = {1: "front-left", 2: "front-right", 3: "rear-left", 4: "rear-right"}
+#: Maximum number of alarm-onset lines drawn per figure (the rest are counted).
+MAX_ALARM_LINES = 200
+#: Maximum number of fault-window rectangles drawn per figure.
+MAX_FAULT_WINDOWS = 200
+
+
+def _typed(a: np.ndarray) -> dict[str, str]:
+    """plotly.js typed-array encoding (base64 little-endian float32)."""
+    a32 = np.ascontiguousarray(np.asarray(a, dtype="<f4"))
+    return {"dtype": "f4", "bdata": base64.b64encode(a32.tobytes()).decode("ascii")}
+
+
+def _sensor_title(sensor: str) -> str:
+    side = _SIDE_NAMES.get(sensor[:1], sensor[:1])
+    try:
+        corner = _CORNER_NAMES.get(int(sensor[1:]), f"sensor {sensor[1:]}")
+    except ValueError:
+        corner = sensor
+    return f"{sensor}: {side} foot, {corner}"
+
+
+def _intervals_from_mask(t: np.ndarray, m: np.ndarray) -> list[tuple[float, float]]:
+    d = np.diff(m.astype(np.int8), prepend=0, append=0)
+    a = np.flatnonzero(d == 1)
+    b = np.flatnonzero(d == -1)
+    return [(float(t[i]), float(t[min(j, t.size - 1)])) for i, j in zip(a, b, strict=True)]
+
+
+def _line_trace(
+    df: pd.DataFrame,
+    t: np.ndarray,
+    col: str,
+    kind: str,
+    yaxis: str,
+    dash: str,
+    width: float,
+    keep: np.ndarray | None,
+    max_points: int,
+) -> dict[str, Any]:
+    """One decimated line trace of column ``col`` (a signal of type ``kind``)."""
+    y = df[col].to_numpy(dtype=float)
+    idx = minmax_indices(y, max_points, keep)
+    return {
+        "type": "scatter",
+        "mode": "lines",
+        "name": SIGNAL_LABELS[kind],
+        "legendgroup": kind,
+        "x": _typed(t[idx]),
+        "y": _typed(y[idx]),
+        "yaxis": yaxis,
+        "line": {"color": SIGNAL_COLORS[kind], "width": width, "dash": dash},
+        "hovertemplate": f"{SIGNAL_LABELS[kind]}: %{{y:.1f}} N<extra></extra>",
+        "meta": {"signal": kind, "column": col},
+    }
+
+
+def sensor_figure_specs(
+    df: pd.DataFrame, max_points: int = 2000, focus_s: float = 1.5
+) -> list[dict[str, Any]]:
+    """Plotly figure specs (``{"id", "sensor", "data", "layout", "n_traces"}``) per sensor.
+
+    Args:
+        df: Output of ``grfguard run`` (``time`` [s] plus any per-sensor columns).
+        max_points: Number of min/max buckets per trace (display decimation).
+        focus_s: Half-width in [s] of the full-resolution windows around every fault
+            and alarm onset.
+
+    Returns:
+        One JSON-serialisable spec per sensor found in ``df``.
+    """
+    t = _time(df)
+    specs: list[dict[str, Any]] = []
+    for k, s in enumerate(detect_sensors(df)):
+        side = s[:1]
+        centres = np.concatenate([fault_onsets(df, s), alarm_onsets(df, s)])
+        keep = window_mask(t, centres, focus_s) if centres.size else None
+        if keep is not None and keep.sum() > 20 * max_points:
+            keep = None  # an alarm storm: fall back to plain decimation
+        data: list[dict[str, Any]] = []
+
+        def line(col: str, kind: str, yaxis: str, dash: str = "solid", width: float = 1.4,
+                 data: list[dict[str, Any]] = data, keep: np.ndarray | None = keep) -> None:
+            if col in df.columns:
+                data.append(_line_trace(df, t, col, kind, yaxis, dash, width, keep, max_points))
+
+        cc = f"contact_ref_{side}"
+        if cc in df.columns:
+            x, y = step_edges(t, df[cc].fillna(0).to_numpy().astype(float) > 0.5)
+            data.append(
+                {
+                    "type": "scatter",
+                    "mode": "lines",
+                    "name": f"stance ({_SIDE_NAMES.get(side, side)} foot, planned)",
+                    "x": _typed(x),
+                    "y": _typed(y),
+                    "yaxis": "y3",
+                    "fill": "tozeroy",
+                    "legendrank": 2000,
+                    "fillcolor": CONTACT_SHADE,
+                    "line": {"width": 0, "shape": "hv", "color": CONTACT_SHADE},
+                    "hoverinfo": "skip",
+                    "meta": {"signal": "contact", "column": cc},
+                }
+            )
+        line(f"true_force_{s}", "true", "y", dash="dot", width=1.6)
+        line(f"force_{s}", "measured", "y")
+        line(f"vfs_{s}", "vfs", "y")
+        line(f"recovered_{s}", "recovered", "y")
+        line(f"fault_{s}", "fault", "y2", dash="dot", width=1.6)
+        line(f"eta_{s}", "eta", "y2")
+        fc = f"flag_{s}"
+        if fc in df.columns:
+            x, y = step_edges(t, df[fc].fillna(False).to_numpy().astype(bool))
+            data.append(
+                {
+                    "type": "scatter",
+                    "mode": "lines",
+                    "name": "flag (0/1)",
+                    "x": _typed(x),
+                    "y": _typed(y),
+                    "yaxis": "y4",
+                    "line": {"color": SIGNAL_COLORS["flag"], "width": 1.2, "shape": "hv"},
+                    "hovertemplate": "flag: %{y:.0f}<extra></extra>",
+                    "meta": {"signal": "flag", "column": fc},
+                }
+            )
+
+        shapes: list[dict[str, Any]] = []
+        fm = fault_mask(df, s)
+        windows = _intervals_from_mask(t, fm) if fm is not None and fm.any() else []
+        for i, (a, b) in enumerate(windows[:MAX_FAULT_WINDOWS]):
+            shapes.append(
+                {
+                    "type": "rect",
+                    "xref": "x",
+                    "yref": "paper",
+                    "x0": a,
+                    "x1": b,
+                    "y0": 0,
+                    "y1": 1,
+                    "fillcolor": FAULT_SHADE,
+                    "line": {"width": 0},
+                    "layer": "below",
+                    "name": "injected fault",
+                    "showlegend": i == 0,
+                }
+            )
+        onsets = alarm_onsets(df, s)
+        for i, a in enumerate(onsets[:MAX_ALARM_LINES]):
+            shapes.append(
+                {
+                    "type": "line",
+                    "xref": "x",
+                    "yref": "paper",
+                    "x0": float(a),
+                    "x1": float(a),
+                    "y0": 0,
+                    "y1": 1,
+                    "line": {"color": ALARM_COLOR, "width": 1.2, "dash": "dash"},
+                    "name": "alarm onset",
+                    "showlegend": i == 0,
+                }
+            )
+        note = ""
+        if onsets.size > MAX_ALARM_LINES or len(windows) > MAX_FAULT_WINDOWS:
+            note = (
+                f" (marks capped: {min(onsets.size, MAX_ALARM_LINES)}/{onsets.size} alarm "
+                f"onsets, {min(len(windows), MAX_FAULT_WINDOWS)}/{len(windows)} fault windows)"
+            )
+        has_y2 = any(d["yaxis"] in ("y2", "y4") for d in data)
+        top = [0.42, 1.0] if has_y2 else [0.0, 1.0]
+        layout: dict[str, Any] = {
+            "title": {"text": _sensor_title(s) + note, "x": 0.01, "font": {"size": 15}},
+            "height": 470 if has_y2 else 340,
+            "margin": {"l": 70, "r": 60, "t": 40, "b": 90},
+            "template": "none",
+            "paper_bgcolor": "white",
+            "plot_bgcolor": "white",
+            "font": {"family": "system-ui, -apple-system, Segoe UI, Roboto, sans-serif"},
+            "hovermode": "x",
+            "legend": {
+                "orientation": "h",
+                "yref": "container",
+                "y": 0.0,
+                "yanchor": "bottom",
+                "x": 0,
+                "font": {"size": 12},
+            },
+            "xaxis": {
+                "title": {"text": "time [s]"},
+                "anchor": "y2" if has_y2 else "y",
+                "showgrid": True,
+                "gridcolor": "#e5e5e5",
+                "zeroline": False,
+            },
+            "yaxis": {
+                "title": {"text": "force [N]"},
+                "domain": top,
+                "showgrid": True,
+                "gridcolor": "#e5e5e5",
+                "zeroline": True,
+                "zerolinecolor": "#bbbbbb",
+            },
+            "yaxis3": {  # stance strip: 0/1 fills the top 1/12 of the force panel
+                "overlaying": "y",
+                "range": [-11, 1],
+                "visible": False,
+                "fixedrange": True,
+            },
+            "shapes": shapes,
+        }
+        if has_y2:
+            layout["yaxis2"] = {
+                "title": {"text": "fault [N]"},
+                "domain": [0.0, 0.34],
+                "showgrid": True,
+                "gridcolor": "#e5e5e5",
+                "zeroline": True,
+                "zerolinecolor": "#bbbbbb",
+            }
+            layout["yaxis4"] = {
+                "overlaying": "y2",
+                "side": "right",
+                "range": [-0.05, 1.6],
+                "tickvals": [0, 1],
+                "title": {"text": "flag"},
+                "showgrid": False,
+                "fixedrange": True,
+            }
+        for d in data:
+            d["xaxis"] = "x"
+        specs.append(
+            {
+                "id": f"fig-{k}-{s}",
+                "sensor": s,
+                "data": data,
+                "layout": layout,
+                "n_traces": len(data),
+            }
+        )
+    return specs
+
+
+def _fmt(value: Any, digits: int = 2) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return "–" if math.isnan(float(value)) else f"{float(value):.{digits}f}"
+    return _html.escape(str(value))
+
+
+_TABLE_COLUMNS: tuple[tuple[str, str, int], ...] = (
+    ("state", "state", 0),
+    ("injected_kind", "injected kind", 0),
+    ("detected_kind", "detected kind", 0),
+    ("kind_correct", "kind correct", 0),
+    ("fault_onset_s", "fault onset [s]", 3),
+    ("alarm_onset_s", "first alarm [s]", 3),
+    ("delay_s", "delay [s]", 3),
+    ("false_alarms", "false alarms", 0),
+    ("false_alarm_time_s", "false-alarm time [s]", 2),
+    ("true_size_n", "true size [N]", 1),
+    ("estimated_size_n", "estimated size [N]", 1),
+    ("size_error_n", "size error [N]", 1),
+    ("recovery_rmse_n", "recovery RMSE [N]", 1),
+    ("raw_rmse_n", "raw RMSE [N]", 1),
+)
+
+
+def _summary_html(summary: pd.DataFrame, thresholds: Any) -> str:
+    cols = [c for c in _TABLE_COLUMNS if c[0] in summary.columns]
+    extra = [c for c in summary.columns if c not in {c[0] for c in _TABLE_COLUMNS}]
+    per_sensor_thr = isinstance(thresholds, Mapping) and all(
+        isinstance(v, (int, float)) for v in thresholds.values()
+    )
+    head = "<th>sensor</th>" + "".join(f"<th>{_html.escape(h)}</th>" for _, h, _ in cols)
+    head += "".join(f"<th>{_html.escape(str(c))}</th>" for c in extra)
+    if per_sensor_thr:
+        head += "<th>threshold [N]</th>"
+    body = []
+    for i, (s, row) in enumerate(summary.iterrows()):
+        name = _html.escape(str(s))
+        cells = [f"<td><a href='#fig-{i}-{name}'>{name}</a></td>"]
+        for c, _, digits in cols:
+            v = row[c]
+            if c == "state":
+                cls = str(v).replace(" ", "-")
+                cells.append(f"<td><span class='state {cls}'>{_fmt(v)}</span></td>")
+            else:
+                cells.append(f"<td>{_fmt(v, digits)}</td>")
+        cells += [f"<td>{_fmt(row[c])}</td>" for c in extra]
+        if per_sensor_thr:
+            cells.append(f"<td>{_fmt(thresholds.get(s, math.nan), 1)}</td>")
+        body.append(f"<tr data-sensor='{_html.escape(str(s))}'>" + "".join(cells) + "</tr>")
+    return (
+        "<table class='summary' id='summary'><thead><tr>" + head + "</tr></thead><tbody>"
+        + "".join(body) + "</tbody></table>"
+    )
+
+
+def _jsonable(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return _jsonable(dataclasses.asdict(value))
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    return str(value)
+
+
+def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
+    rows: list[tuple[str, str]] = []
+    if t.size > 1:
+        dt = float(np.median(np.diff(t)))
+        rows.append(("samples", f"{t.size} ({t[0]:.3f} s to {t[-1]:.3f} s, {1 / dt:.0f} Hz)"))
+    has = [
+        name
+        for name, prefix in (
+            ("truth", "true_force_"),
+            ("injected faults", "fault_kind_"),
+            ("VFS", "vfs_"),
+            ("recovery", "recovered_"),
+            ("flags", "flag_"),
+            ("planned contact", "contact_ref_"),
+        )
+        if any(str(c).startswith(prefix) for c in df.columns)
+    ]
+    rows.append(("signals present", ", ".join(has) if has else "forces only"))
+    preferred = ("robot", "gait", "method", "thresholds", "seed", "scenario", "faults")
+    keys = [k for k in preferred if k in df.attrs] + sorted(
+        (str(k) for k in df.attrs if k not in preferred), key=str
+    )
+    for k in keys:
+        v = _jsonable(df.attrs[k])
+        if isinstance(v, (dict, list)):
+            text = json.dumps(v, indent=1, sort_keys=True, default=str)
+            if len(text) > 4000:
+                text = text[:4000] + "\n..."
+            rows.append((k, f"<pre>{_html.escape(text)}</pre>"))
+        else:
+            rows.append((k, _html.escape(str(v))))
+    return (
+        "<table class='meta' id='metadata'>"
+        + "".join(f"<tr><th>{_html.escape(k)}</th><td>{v}</td></tr>" for k, v in rows)
+        + "</table>"
+    )
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0;color:#222;
+background:#fafafa}
+header{background:#1f2d3d;color:#fff;padding:14px 24px}
+header h1{margin:0;font-size:20px;font-weight:600}
+header p{margin:4px 0 0;font-size:13px;opacity:.8}
+main{padding:12px 24px;max-width:1500px}
+h2{font-size:16px;margin:22px 0 8px}
+table{border-collapse:collapse;font-size:13px;background:#fff}
+th,td{border:1px solid #ddd;padding:4px 8px;text-align:right;vertical-align:top}
+th{background:#f0f2f5}
+table.meta th,table.meta td{text-align:left}
+table.meta pre{margin:0;font-size:12px;max-height:220px;overflow:auto}
+td:first-child{text-align:left;font-weight:600}
+.state{padding:1px 6px;border-radius:8px;font-size:12px;white-space:nowrap}
+.state.detected{background:#fde2d6;color:#8a2a00}
+.state.healthy,.state.ok{background:#dcf3e8;color:#0b5a3a}
+.state.false-alarm,.state.alarm{background:#fff1c2;color:#6b5200}
+.state.missed{background:#f9c5c5;color:#7a0000}
+.state.faulty{background:#eee;color:#333}
+.fig{background:#fff;border:1px solid #e3e3e3;margin:10px 0}
+.note{font-size:12px;color:#555}
+"""
+
+_JS = """
+(function () {
+  var status = {ready: false, figures: [], errors: [], renderMs: null};
+  window.grfguardReport = status;
+  var specs = JSON.parse(document.getElementById('grfguard-data').textContent);
+  var config = {responsive: true, displaylogo: false, scrollZoom: false,
+                modeBarButtonsToRemove: ['lasso2d', 'select2d']};
+  var t0 = performance.now();
+  var chain = Promise.resolve();
+  specs.forEach(function (spec) {
+    status.figures.push({id: spec.id, sensor: spec.sensor, n_traces: spec.n_traces});
+    chain = chain.then(function () {
+      return Plotly.newPlot(spec.id, spec.data, spec.layout, config);
+    }).catch(function (err) { status.errors.push(String(err)); });
+  });
+  chain.then(function () {
+    status.renderMs = performance.now() - t0;
+    status.ready = true;
+    document.body.setAttribute('data-ready', '1');
+  });
+})();
+"""
+
+
+def build_html_report(
+    df: pd.DataFrame,
+    metrics: Mapping[str, Mapping[str, Any]] | None = None,
+    title: str | None = None,
+    max_points: int = 2000,
+    focus_s: float = 1.5,
+) -> str:
+    """The report as one HTML string (see :func:`write_html_report`)."""
+    if not isinstance(df, pd.DataFrame):
+        raise LogFormatError(
+            f"the report needs a pandas DataFrame (output of `grfguard run`), got "
+            f"{type(df).__name__}"
+        )
+    if not (isinstance(max_points, int) and max_points >= 10):
+        raise ConfigError(f"max_points = {max_points!r} must be an integer >= 10")
+    if not (focus_s >= 0 and math.isfinite(focus_s)):
+        raise ConfigError(f"focus_s = {focus_s!r} must be a finite number of seconds >= 0")
+    t = _time(df)
+    if not detect_sensors(df):
+        raise LogFormatError(
+            "no sensor columns found (force_r1, vfs_r1, flag_r1, ...); pass the output of "
+            "`grfguard run` or a log following the log contract"
+        )
+    from plotly.offline import get_plotlyjs
+
+    summary = sensor_summary(df, metrics)
+    specs = sensor_figure_specs(df, max_points=max_points, focus_s=focus_s)
+    title = title or f"grfguard report: {df.attrs.get('robot', 'run')}"
+    payload = json.dumps(specs, separators=(",", ":"), allow_nan=False)
+    payload = payload.replace("</", "<\\/")
+    n_faulty = int((summary["state"] == "detected").sum() + (summary["state"] == "missed").sum())
+    n_flagged = int(sum(alarm_onsets(df, s).size > 0 for s in summary.index))
+    subtitle = (
+        f"{t.size} samples, {t[-1] - t[0]:.1f} s; {len(summary)} sensors, "
+        f"{n_faulty} with injected faults, {n_flagged} raised alarms"
+    )
+    figs = "".join(
+        f"<div class='fig' id='{sp['id']}' data-sensor='{sp['sensor']}' "
+        f"data-traces='{sp['n_traces']}' style='height:{sp['layout']['height']}px'></div>"
+        for sp in specs
+    )
+    return (
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>"
+        f"<meta name='generator' content='grfguard'><title>{_html.escape(title)}</title>"
+        f"<style>{_CSS}</style>"
+        f"<script>{get_plotlyjs()}</script></head><body>"
+        f"<header><h1>{_html.escape(title)}</h1><p>{_html.escape(subtitle)}</p></header><main>"
+        "<h2>Sensors</h2>"
+        + _summary_html(summary, df.attrs.get("thresholds"))
+        + "<p class='note'>"
+        + ("Metrics from grfguard.evaluate.detection where given, else: " if metrics is not None
+           else "")
+        + "Delay: first alarm at or after the fault onset. False alarms: alarm "
+        "episodes starting outside injected fault windows. Size: mean over the last second of "
+        "the fault window. Recovery / raw RMSE: recovered / measured minus true force over the "
+        "flagged samples of the fault window. – : undefined or not in the log.</p>"
+        "<h2>Run</h2>" + _metadata_html(df, t)
+        + "<h2>Signals</h2><p class='note'>Blue strip at the top: planned stance of the "
+        "sensor's foot; shaded red: injected fault; red dashed lines: alarm onsets. Traces are "
+        f"decimated for display ({max_points} min/max buckets, peaks kept; full resolution within "
+        f"{focus_s:g} s of fault and alarm onsets). Click legend entries to hide traces, drag "
+        "to zoom, double-click to reset.</p>"
+        + figs
+        + "<script type='application/json' id='grfguard-data'>" + payload + "</script>"
+        + f"<script>{_JS}</script></main></body></html>"
+    )
+
+
+def write_html_report(
+    df: pd.DataFrame,
+    path: str | Path,
+    metrics: Mapping[str, Mapping[str, Any]] | None = None,
+    title: str | None = None,
+    max_points: int = 2000,
+    focus_s: float = 1.5,
+) -> Path:
+    """Write one self-contained HTML report of a ``grfguard run`` output.
+
+    Args:
+        df: Output of ``grfguard run``: ``time`` [s] and any of ``force_<s>``,
+            ``true_force_<s>``, ``vfs_<s>``, ``recovered_<s>``, ``eta_<s>``,
+            ``fault_<s>`` [N], ``flag_<s>``, ``kind_<s>``, ``fault_kind_<s>``,
+            ``contact_ref_r/l``; metadata in ``df.attrs``. Missing columns are
+            left out of the report.
+        path: Output file (``.html``); parent directories are created.
+        metrics: Optional per-sensor metrics (sensor -> dict) from
+            ``grfguard.evaluate.detection``; a fallback summary is computed otherwise.
+        title: Page title (default: ``grfguard report: <robot>``).
+        max_points: Min/max buckets per trace for display.
+        focus_s: Half-width in [s] of full-resolution windows around fault and alarm onsets.
+
+    Returns:
+        The path written.
+
+    Raises:
+        LogFormatError: If ``df`` has no ``time`` column, time is not strictly
+            increasing, or there is no sensor column.
+        ConfigError: If ``max_points`` or ``focus_s`` is out of range.
+    """
+    text = build_html_report(df, metrics=metrics, title=title, max_points=max_points,
+                             focus_s=focus_s)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    return out
