@@ -233,3 +233,67 @@ def angular_momentum_about_com(
     w_B = np.einsum("...ji,...j->...i", R_WB, w)
     rot = np.einsum("...ij,...j->...i", R_WB, w_B * body_inertia).sum(axis=-2)
     return lin + rot
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def _qexp(rotvec: np.ndarray) -> np.ndarray:
+    th = float(np.sqrt(rotvec @ rotvec))
+    if th < 1e-12:
+        return np.array([1.0, 0.5 * rotvec[0], 0.5 * rotvec[1], 0.5 * rotvec[2]])
+    s = np.sin(0.5 * th) / th
+    return np.array([np.cos(0.5 * th), s * rotvec[0], s * rotvec[1], s * rotvec[2]])
+
+
+class AttitudeFilter:
+    """Complementary attitude filter: gyro integration pulled slowly toward the IMU quaternion.
+
+    The attitude estimator's quaternion in the log carries white jitter (about 1 mrad) that
+    finite differences turn into large fake accelerations; the gyro is smooth. Per sample::
+
+        q <- q (x) Exp(w dt)                        (gyro, IMU frame)
+        q <- q (x) Exp(k Log(q^-1 (x) q_meas)),     k = dt / (tau + dt)
+
+    so the result follows the gyro above ``1 / (2 pi tau)`` and the logged attitude (and
+    its gyro-bias-free drift correction) below.
+
+    Args:
+        dt_s: Sampling period [s].
+        time_constant_s: ``tau`` [s]; 0 returns the logged quaternion unchanged.
+    """
+
+    def __init__(self, dt_s: float, time_constant_s: float) -> None:
+        self.dt = dt_s
+        self.k = dt_s / (time_constant_s + dt_s) if time_constant_s > 0 else 1.0
+        self.q: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the state."""
+        self.q = None
+
+    def update(self, quat_meas_wxyz: np.ndarray, gyro_rad_s: np.ndarray | None) -> np.ndarray:
+        """One sample: filtered attitude (4,) ``w, x, y, z``."""
+        qm = np.asarray(quat_meas_wxyz, float)
+        qm = qm / np.sqrt(qm @ qm)
+        if self.q is None or self.k >= 1.0 or gyro_rad_s is None:
+            self.q = qm
+            return qm.copy()
+        q = _qmul(self.q, _qexp(np.asarray(gyro_rad_s, float) * self.dt))
+        e = _qmul(np.array([q[0], -q[1], -q[2], -q[3]]), qm)
+        if e[0] < 0:
+            e = -e
+        q = _qmul(q, _qexp(2.0 * self.k * e[1:]))
+        q = q / np.sqrt(q @ q)
+        self.q = q
+        return q.copy()

@@ -36,6 +36,7 @@ from grfguard.estimate.com import (
 )
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.kinematic import (
+    AttitudeFilter,
     KinematicFrames,
     KinematicModel,
     angular_momentum_about_com,
@@ -56,6 +57,7 @@ from grfguard.io.schema import (
     CONTACT_REF,
     FORCE_COLUMNS,
     IMU_ACC,
+    IMU_GYRO,
     IMU_QUAT,
     JOINT_COLUMNS,
     TIME,
@@ -181,6 +183,7 @@ class VirtualForceSensor:
         """Forget all state (odometry anchor, filters, previous samples)."""
         c = self.config
         self._odo = LegOdometry(c.contact_height)
+        self._att = AttitudeFilter(c.dt, c.attitude_time_constant)
         self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 6)
         self._prev_c: np.ndarray | None = None
         self._prev_v: np.ndarray | None = None
@@ -229,6 +232,11 @@ class VirtualForceSensor:
                 extra["forces"] = np.array([float(row[k]) for k in FORCE_COLUMNS])
                 zr = [row.get(k, np.nan) for k in ZMP_REF]
                 extra["zmp_ref"] = np.array([float(v) for v in zr])
+            gyro = (
+                np.array([float(row[k]) for k in IMU_GYRO])
+                if all(k in row for k in IMU_GYRO)
+                else None
+            )
             if all(k in row for k in CONTACT_REF):
                 stance = np.array([float(row[k]) for k in CONTACT_REF])
             else:
@@ -238,8 +246,11 @@ class VirtualForceSensor:
         vals = [q, quat] + [v for k, v in extra.items() if k != "zmp_ref"]
         if stance is not None:
             vals.append(stance)
+        if gyro is not None:
+            vals.append(gyro)
         if not all(np.all(np.isfinite(v)) for v in vals) or np.linalg.norm(quat) < 1e-6:
             return self._hold()
+        quat = self._att.update(quat, gyro)
         fr = self.kin.forward(q, quat)
         st = (stance > 0.5) if stance is not None else self._stance_fallback(fr.p_AK)
         p_WT, ground, _ = self._odo.update(fr.p_AK, fr.p_AS, st)
@@ -378,6 +389,10 @@ class VirtualForceSensor:
         quat_all = log[list(IMU_QUAT)].to_numpy(float)
         has_ref = all(k in log.columns for k in CONTACT_REF)
         parts = [q_all, quat_all]
+        has_gyro = all(k in log.columns for k in IMU_GYRO)
+        if has_gyro:
+            gyro_all = log[list(IMU_GYRO)].to_numpy(float)
+            parts.append(gyro_all)
         if has_ref:
             st_all = log[list(CONTACT_REF)].to_numpy(float)
             parts.append(st_all)
@@ -397,7 +412,11 @@ class VirtualForceSensor:
         result["vfs_valid"] = valid.astype(float)
         if m == 0:
             return pd.DataFrame(result, index=log.index)
-        fr = self.kin.forward_batch(q_all[idx], quat_all[idx])
+        quat_f = np.empty((m, 4))
+        att = self._att
+        for i, j in enumerate(idx):
+            quat_f[i] = att.update(quat_all[j], gyro_all[j] if has_gyro else None)
+        fr = self.kin.forward_batch(q_all[idx], quat_f)
         if has_ref:
             st = st_all[idx] > 0.5
         else:
@@ -434,7 +453,7 @@ class VirtualForceSensor:
             com_out = np.empty((m, 3))
             force = np.empty((m, 3))
             zmp = np.empty((m, 2))
-            quat_v, acc_v, f_v, zr_v = quat_all[idx], acc_all[idx], f_all[idx], zr_all[idx]
+            quat_v, acc_v, f_v, zr_v = quat_f, acc_all[idx], f_all[idx], zr_all[idx]
             for i in range(m):
                 co, fo, zm = self._paper_step(
                     None, p_WT[i], p_WK[i], com_W[i], ground[i], quat_v[i], acc_v[i], f_v[i],
