@@ -57,7 +57,16 @@ class VFSConfig:
     #: Cut-off of the causal Butterworth low-pass on the CoM and angular momentum before
     #: differentiation in [Hz] (higher lets attitude jitter through).
     filter_cutoff: float = 15.0
-    #: Order of that Butterworth filter.
+    #: Fuse the accelerometer: IMU-point acceleration from the accelerometer above
+    #: ``fusion_cutoff`` and from leg odometry below it (removes the accelerometer bias and
+    #: the lag of differentiating odometry); the CoM motion relative to the IMU comes from
+    #: kinematics through the ``filter_cutoff`` low-pass.
+    use_accelerometer: bool = False
+    #: Cross-over of the accelerometer / odometry complementary filter in [Hz].
+    fusion_cutoff: float = 2.0
+    #: Low-pass on the accelerometer (white noise) in [Hz].
+    acc_cutoff: float = 40.0
+    #: Order of the Butterworth filters.
     filter_order: int = 2
     #: Sampling period in [s] (taken from the log when it has a ``time`` column).
     dt: float = 0.001
@@ -102,7 +111,9 @@ class VFSConfig:
             raise ConfigError(
                 f"vfs.filter_order = {self.filter_order!r} must be an integer in [1, 8]"
             )
-        for flag in ("use_angular_momentum", "kinematic_contact"):
+        _num("fusion_cutoff", self.fusion_cutoff, 0.01, 0.45 / self.dt, "Hz")
+        _num("acc_cutoff", self.acc_cutoff, 0.1, 0.45 / self.dt, "Hz")
+        for flag in ("use_angular_momentum", "kinematic_contact", "use_accelerometer"):
             if not isinstance(getattr(self, flag), bool):
                 raise ConfigError(f"vfs.{flag} must be true or false, got {getattr(self, flag)!r}")
         _num("attitude_time_constant", self.attitude_time_constant, 0.0, 1e3, "s")

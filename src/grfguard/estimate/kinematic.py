@@ -59,6 +59,7 @@ class KinematicFrames:
         p_AK: (T, 8, 3) lowest point of each corner sphere in A [m], order r1..r4, l1..l4.
         p_AS: (T, 2, 3) sole-centre sites in A [m], right then left.
         R_WS: (T, 2, 3, 3) sole frame rotations.
+        p_AI: (T, 3) IMU site in A [m].
     """
 
     p_AC: np.ndarray
@@ -67,6 +68,7 @@ class KinematicFrames:
     p_AK: np.ndarray
     p_AS: np.ndarray
     R_WS: np.ndarray
+    p_AI: np.ndarray
 
 
 class KinematicModel:
@@ -103,6 +105,7 @@ class KinematicModel:
             [m.jnt_qposadr[_id(mujoco.mjtObj.mjOBJ_JOINT, j)] for j in JOINT_NAMES], dtype=int
         )
         imu = _id(mujoco.mjtObj.mjOBJ_SITE, "imu")
+        self.imu_site = imu
         if int(m.site_bodyid[imu]) != self.trunk_id:
             raise ConfigError("the `imu` site must sit on the `trunk` body")
         #: Rotation of the IMU site in the trunk frame.
@@ -158,6 +161,7 @@ class KinematicModel:
             p_AK=p_AK,
             p_AS=np.array(d.site_xpos[self.sole_sites]),
             R_WS=np.array(d.site_xmat[self.sole_sites]).reshape(-1, 3, 3),
+            p_AI=np.array(d.site_xpos[self.imu_site]),
         )
 
     # ------------------------------------------------------------------ batch
@@ -177,6 +181,7 @@ class KinematicModel:
             p_AK=np.empty((n, 8, 3)),
             p_AS=np.empty((n, 2, 3)),
             R_WS=np.empty((n, 2, 3, 3)),
+            p_AI=np.empty((n, 3)),
         )
         for i in range(n):
             f = self.forward(q_rad[i], quat_imu_wxyz[i])
@@ -186,6 +191,7 @@ class KinematicModel:
             out.p_AK[i] = f.p_AK
             out.p_AS[i] = f.p_AS
             out.R_WS[i] = f.R_WS
+            out.p_AI[i] = f.p_AI
         return out
 
 

@@ -184,9 +184,11 @@ class VirtualForceSensor:
         c = self.config
         self._odo = LegOdometry(c.contact_height)
         self._att = AttitudeFilter(c.dt, c.attitude_time_constant)
-        self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 6)
-        self._prev_c: np.ndarray | None = None
-        self._prev_v: np.ndarray | None = None
+        self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 9)
+        self._lp_fuse = CausalLowPass(c.fusion_cutoff, c.dt, c.filter_order, 3)
+        self._lp_acc = CausalLowPass(c.acc_cutoff, c.dt, c.filter_order, 3)
+        self._hist_I: list[np.ndarray] = []
+        self._hist_C: list[np.ndarray] = []
         self._prev_frames: KinematicFrames | None = None
         self._prev_L: np.ndarray | None = None
         self._paper: PaperCoMFilter | None = None
@@ -198,6 +200,8 @@ class VirtualForceSensor:
         need = [*IMU_QUAT, *JOINT_COLUMNS]
         if self.config.com_method == "paper":
             need += [*IMU_ACC, *FORCE_COLUMNS]
+        elif self.config.use_accelerometer:
+            need += [*IMU_ACC]
         missing = [c for c in need if c not in cols]
         if missing:
             raise LogFormatError(
@@ -227,8 +231,9 @@ class VirtualForceSensor:
             q = np.array([float(row[k]) for k in JOINT_COLUMNS])
             quat = np.array([float(row[k]) for k in IMU_QUAT])
             extra = {}
-            if c.com_method == "paper":
+            if c.com_method == "paper" or c.use_accelerometer:
                 extra["acc"] = np.array([float(row[k]) for k in IMU_ACC])
+            if c.com_method == "paper":
                 extra["forces"] = np.array([float(row[k]) for k in FORCE_COLUMNS])
                 zr = [row.get(k, np.nan) for k in ZMP_REF]
                 extra["zmp_ref"] = np.array([float(v) for v in zr])
@@ -257,11 +262,15 @@ class VirtualForceSensor:
         com_W = p_WT + fr.p_AC
         p_WK = p_WT[None, :] + fr.p_AK
         if c.com_method == "multibody":
-            a_raw, ld_raw = self._raw_rates(com_W, fr)
-            filt = self._lp.update(np.concatenate([a_raw, ld_raw]))
-            force = self.mass * (filt[:3] + np.array([0.0, 0.0, self.g]))
-            ld = filt[3:] if c.use_angular_momentum else np.zeros(3)
-            zmp = zmp_from_momentum(com_W, force, ld, ground)
+            raw = self._raw_rates(p_WT + fr.p_AI, fr.p_AC - fr.p_AI, fr)
+            acc_W = None
+            if c.use_accelerometer:
+                acc_W = quat_to_matrix(quat) @ extra["acc"] - np.array([0.0, 0.0, self.g])
+            c_dd, ld = self._filter_rates(
+                raw[None], None if acc_W is None else acc_W[None], stream=True
+            )
+            force = self.mass * (c_dd[0] + np.array([0.0, 0.0, self.g]))
+            zmp = zmp_from_momentum(com_W, force, ld[0], ground)
             com_out = com_W
         else:
             com_out, force, zmp = self._paper_step(
@@ -283,29 +292,45 @@ class VirtualForceSensor:
         res["vfs_valid"] = 0.0
         return res
 
-    def _raw_rates(self, com_W: np.ndarray, fr: KinematicFrames) -> tuple[np.ndarray, np.ndarray]:
+    def _raw_rates(self, p_WI: np.ndarray, p_IC: np.ndarray, fr: KinematicFrames) -> np.ndarray:
+        """Raw (unfiltered) rates of one sample: (9,) = [d2 p_IC, L_dot, d2 p_WI]."""
         dt = self.config.dt
-        if self._prev_c is None:
-            v = None
-        else:
-            v = (com_W - self._prev_c) / dt
-        if v is not None and self._prev_v is not None:
-            a_raw = (v - self._prev_v) / dt
-        else:
-            a_raw = np.zeros(3)
+        hI, hC = self._hist_I, self._hist_C
+        hI.append(p_WI)
+        hC.append(p_IC)
+        if len(hI) > 3:
+            del hI[0], hC[0]
+        raw = np.zeros(9)
+        if len(hI) == 3:
+            for off, h in ((0, hC), (6, hI)):
+                v1 = (h[2] - h[1]) / dt
+                v0 = (h[1] - h[0]) / dt
+                raw[off : off + 3] = (v1 - v0) / dt
+        L = None
         if self._prev_frames is not None:
             L = angular_momentum_about_com(
-                fr.p_AB, fr.R_WB, self._prev_frames.p_AB, self._prev_frames.R_WB,
-                self.kin.body_mass, self.kin.body_inertia, dt,
-            )
+                fr.p_AB[None], fr.R_WB[None], self._prev_frames.p_AB[None],
+                self._prev_frames.R_WB[None], self.kin.body_mass, self.kin.body_inertia, dt,
+            )[0]
+            if self._prev_L is not None:
+                raw[3:6] = (L - self._prev_L) / dt
+        self._prev_frames, self._prev_L = fr, L
+        return raw
+
+    def _filter_rates(
+        self, raw: np.ndarray, acc_W: np.ndarray | None, stream: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """CoM acceleration (T, 3) and angular momentum rate (T, 3) from raw rates (T, 9)."""
+        c = self.config
+        run = (lambda f, x: f.update(x[0])[None]) if stream else (lambda f, x: f.run(x))
+        main = run(self._lp, raw)
+        if acc_W is not None:
+            c_dd = run(self._lp_acc, acc_W) + run(self._lp_fuse, raw[:, 6:9] - acc_W)
+            c_dd = c_dd + main[:, 0:3]
         else:
-            L = None
-        if L is not None and self._prev_L is not None:
-            ld_raw = (L - self._prev_L) / dt
-        else:
-            ld_raw = np.zeros(3)
-        self._prev_c, self._prev_v, self._prev_frames, self._prev_L = com_W, v, fr, L
-        return a_raw, ld_raw
+            c_dd = main[:, 0:3] + main[:, 6:9]
+        ld = main[:, 3:6] if c.use_angular_momentum else np.zeros_like(main[:, 3:6])
+        return c_dd, ld
 
     def _paper_filter(self, com_z_rel: float) -> PaperCoMFilter:
         c = self.config
@@ -396,6 +421,8 @@ class VirtualForceSensor:
         if has_ref:
             st_all = log[list(CONTACT_REF)].to_numpy(float)
             parts.append(st_all)
+        if c.com_method == "multibody" and c.use_accelerometer:
+            parts.append(log[list(IMU_ACC)].to_numpy(float))
         if c.com_method == "paper":
             acc_all = log[list(IMU_ACC)].to_numpy(float)
             f_all = log[list(FORCE_COLUMNS)].to_numpy(float)
@@ -432,21 +459,25 @@ class VirtualForceSensor:
         p_WK = p_WT[:, None, :] + fr.p_AK
         dt = c.dt
         if c.com_method == "multibody":
-            v = np.zeros((m, 3))
-            v[1:] = (com_W[1:] - com_W[:-1]) / dt
-            a_raw = np.zeros((m, 3))
-            a_raw[2:] = (v[2:] - v[1:-1]) / dt
+            raw = np.zeros((m, 9))
+            for off, x in ((0, fr.p_AC - fr.p_AI), (6, p_WT + fr.p_AI)):
+                v = np.zeros((m, 3))
+                v[1:] = (x[1:] - x[:-1]) / dt
+                raw[2:, off : off + 3] = (v[2:] - v[1:-1]) / dt
             L = np.zeros((m, 3))
             if m > 1:
                 L[1:] = angular_momentum_about_com(
                     fr.p_AB[1:], fr.R_WB[1:], fr.p_AB[:-1], fr.R_WB[:-1],
                     self.kin.body_mass, self.kin.body_inertia, dt,
                 )
-            ld_raw = np.zeros((m, 3))
-            ld_raw[2:] = (L[2:] - L[1:-1]) / dt
-            filt = self._lp.run(np.concatenate([a_raw, ld_raw], axis=1))
-            force = self.mass * (filt[:, :3] + np.array([0.0, 0.0, self.g]))
-            ld = filt[:, 3:] if c.use_angular_momentum else np.zeros((m, 3))
+            raw[2:, 3:6] = (L[2:] - L[1:-1]) / dt
+            acc_W = None
+            if c.use_accelerometer:
+                acc_all = log[list(IMU_ACC)].to_numpy(float)[idx]
+                acc_W = np.einsum("tij,tj->ti", quat_to_matrix(quat_f), acc_all)
+                acc_W = acc_W - np.array([0.0, 0.0, self.g])
+            c_dd, ld = self._filter_rates(raw, acc_W, stream=False)
+            force = self.mass * (c_dd + np.array([0.0, 0.0, self.g]))
             zmp = zmp_from_momentum(com_W, force, ld, ground)
             com_out = com_W
         else:
