@@ -330,17 +330,25 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     else:
         sole[:, :, :2] = footsteps[:, 0][:, None, :]
 
-    # ---- pelvis: make the multibody CoM follow the plan
+    # ---- pelvis: make the multibody CoM follow the plan. The corrections run on the
+    # preview grid (every ``sub`` samples); the smooth pelvis-minus-CoM offset is then
+    # interpolated to 1 kHz (error checked below, midway between grid points).
     eye = np.eye(3)
-    pelvis = com_ref.copy()
-    q = _ik_both(robot, pelvis, sole)
-    pelvis = pelvis - (center_of_mass(robot, pelvis, eye, q) - pelvis)
+    grid = np.unique(np.append(np.arange(0, n_t, sub), n_t - 1))
+    com_g, sole_g = com_ref[grid], sole[:, grid]
+    pelvis_g = com_g.copy()
+    q_g = _ik_both(robot, pelvis_g, sole_g)
+    pelvis_g = pelvis_g - (center_of_mass(robot, pelvis_g, eye, q_g) - pelvis_g)
     for _ in range(gait.com_iterations):
-        q = _ik_both(robot, pelvis, sole)
-        err = com_ref - center_of_mass(robot, pelvis, eye, q)
-        pelvis = pelvis + err
+        q_g = _ik_both(robot, pelvis_g, sole_g)
+        pelvis_g = pelvis_g + (com_g - center_of_mass(robot, pelvis_g, eye, q_g))
+    offset_g = pelvis_g - com_g
+    pelvis = com_ref + np.column_stack([np.interp(t, t[grid], offset_g[:, a]) for a in range(3)])
     q = _ik_both(robot, pelvis, sole)
-    com_err = float(np.abs(center_of_mass(robot, pelvis, eye, q) - com_ref).max())
+    check = np.concatenate([grid, np.clip(grid + sub // 2, 0, n_t - 1)])
+    com_err = float(
+        np.abs(center_of_mass(robot, pelvis[check], eye, q[check]) - com_ref[check]).max()
+    )
     reach = _reach_margin(robot, pelvis, sole)
     if reach < 0.0:
         i_bad = int(np.argmin(_reach_all(robot, pelvis, sole)))
