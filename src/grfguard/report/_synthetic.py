@@ -11,6 +11,8 @@ sensor 4 -100 N; flags rise 0.2-1 s later.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -68,7 +70,7 @@ def synthetic_run(
         One row per sample with ``time`` [s], ``force_*``, ``vfs_*``, ``recovered_*``,
         ``eta_*`` [N], ``flag_*`` (bool), ``kind_*`` (text), ``contact_ref_r/l`` (0/1),
         ``vfs_total_r/l`` [N] and, with truth, ``true_force_*``, ``fault_*`` [N] and
-        ``fault_kind_*``. Metadata in ``df.attrs``.
+        ``fault_kind_*``; text columns are categoricals. Metadata in ``df.attrs``.
 
     Raises:
         ConfigError: If a duration, rate or fraction is out of range.
@@ -140,9 +142,11 @@ def synthetic_run(
     vfs = np.where(loaded, true + bias + vfs_err, 0.0) + rng.normal(0.0, 0.5, size=(n, 8))
 
     fault = np.zeros((n, 8))
-    fault_kind = np.full((n, 8), "none", dtype=object)
+    kinds = ("none", "frozen", "offset", "drift", "unknown")
+    code = {k: i for i, k in enumerate(kinds)}
+    fault_kind = np.zeros((n, 8), dtype=np.int8)  # codes into `kinds`
     flag = np.zeros((n, 8), dtype=bool)
-    kind = np.full((n, 8), "none", dtype=object)
+    kind = np.zeros((n, 8), dtype=np.int8)
     idx = {s: i for i, s in enumerate(SENSOR_NAMES)}
     on = time_s >= fault_onset_s
     measured_clean = true + noise
@@ -155,15 +159,15 @@ def synthetic_run(
                 fault[:, j] = np.where(on, size * (time_s - fault_onset_s), 0.0)
             else:
                 fault[:, j] = np.where(on, size, 0.0)
-            fault_kind[on, j] = k
+            fault_kind[on, j] = code[k]
             alarm = time_s >= fault_onset_s + delay
             flag[:, j] = alarm
-            kind[alarm, j] = k
+            kind[alarm, j] = code[k]
     if false_alarm:
         j = idx["l2"]
         fa = (time_s >= 2.0) & (time_s < 2.15)
         flag[fa, j] = True
-        kind[fa, j] = "unknown"
+        kind[fa, j] = code["unknown"]
     measured = measured_clean + fault
     residual = measured - vfs
     eta = _lowpass(residual, dt_s, 0.3)
@@ -173,17 +177,20 @@ def synthetic_run(
         for j in frozen_j:
             recovered[:, j] = np.where(flag[:, j], vfs[:, j], recovered[:, j])
 
-    cols: dict[str, np.ndarray] = {"time": time_s}
+    def text(codes: np.ndarray) -> pd.Categorical:
+        return pd.Categorical.from_codes(codes, categories=kinds)
+
+    cols: dict[str, Any] = {"time": time_s}
     for j, s in enumerate(SENSOR_NAMES):
         cols[f"force_{s}"] = measured[:, j]
         if with_truth:
             cols[f"true_force_{s}"] = true[:, j]
             cols[f"fault_{s}"] = fault[:, j]
-            cols[f"fault_kind_{s}"] = fault_kind[:, j]
+            cols[f"fault_kind_{s}"] = text(fault_kind[:, j])
         cols[f"vfs_{s}"] = vfs[:, j]
         cols[f"eta_{s}"] = eta[:, j]
         cols[f"flag_{s}"] = flag[:, j]
-        cols[f"kind_{s}"] = kind[:, j]
+        cols[f"kind_{s}"] = text(kind[:, j])
         cols[f"recovered_{s}"] = recovered[:, j]
     for side_i, side in enumerate(SIDES):
         cols[f"contact_ref_{side}"] = contact[side]

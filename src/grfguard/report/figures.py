@@ -18,7 +18,8 @@ Plus :func:`plot_sensor` (everything about one sensor), :func:`plot_detection_ti
 :func:`write_png_figures`.
 
 Time range: ``t_range=(t0, t1)`` [s]; by default the whole log if it lasts at most
-120 s, else 10 s before to 30 s after the first fault (or alarm) onset. Long logs are
+120 s, else 10 s before to 30 s after the first injected fault onset (or, without
+injected faults, the first alarm onset). Long logs are
 decimated for drawing with per-bucket min/max (peaks kept).
 """
 
@@ -69,7 +70,7 @@ __all__ = [
 
 _CORNERS = {1: "front-left", 2: "front-right", 3: "rear-left", 4: "rear-right"}
 _SIDES = {"r": "right", "l": "left"}
-_DRAW_BUCKETS = 3000  # min/max buckets per line when drawing long logs
+_DRAW_BUCKETS = 1500  # min/max buckets per line when drawing long logs (~3 per pixel)
 _MAX_MARKS = 200  # cap on shaded windows / alarm lines per axis
 _RAW_ETA_PREFIXES = ("eta_raw_", "eta_unfiltered_", "eta_kf_")
 _FONT = {"axes.titlesize": 10, "axes.labelsize": 9, "xtick.labelsize": 8, "ytick.labelsize": 8}
@@ -120,11 +121,10 @@ def _foot_sensors(df: pd.DataFrame, foot: str | None) -> list[str]:
 def _default_range(df: pd.DataFrame, t: np.ndarray) -> tuple[float, float]:
     if t[-1] - t[0] <= 120.0:
         return float(t[0]), float(t[-1])
-    onsets = np.concatenate(
-        [fault_onsets(df, s) for s in detect_sensors(df)]
-        + [alarm_onsets(df, s) for s in detect_sensors(df)]
-        + [np.zeros(0)]
-    )
+    sensors = detect_sensors(df)
+    onsets = np.concatenate([fault_onsets(df, s) for s in sensors] + [np.zeros(0)])
+    if not onsets.size:
+        onsets = np.concatenate([alarm_onsets(df, s) for s in sensors] + [np.zeros(0)])
     c = float(onsets.min()) if onsets.size else float(t[0]) + 10.0
     return max(float(t[0]), c - 10.0), min(float(t[-1]), c + 30.0)
 
@@ -155,7 +155,7 @@ def _line(ax: Axes, t: np.ndarray, df: pd.DataFrame, rows: slice, col: str, kind
     if col not in df.columns:
         return False
     y = df[col].to_numpy(dtype=float)[rows]
-    idx = minmax_indices(y, _DRAW_BUCKETS) if y.size > 4 * _DRAW_BUCKETS else slice(None)
+    idx = minmax_indices(y, _DRAW_BUCKETS) if y.size > 3 * _DRAW_BUCKETS else slice(None)
     style = {"color": SIGNAL_COLORS[kind], "linewidth": 1.1}
     if kind in ("true", "fault"):
         style.update(linestyle=(0, (3, 1.5)), linewidth=1.2)
@@ -327,7 +327,7 @@ def plot_fault_estimate(
         raw, label = _unfiltered(df, s)
         if raw is not None:
             y = raw[rows]
-            idx = minmax_indices(y, _DRAW_BUCKETS) if y.size > 4 * _DRAW_BUCKETS else slice(None)
+            idx = minmax_indices(y, _DRAW_BUCKETS) if y.size > 3 * _DRAW_BUCKETS else slice(None)
             ax.plot(t[idx], y[idx], color=SIGNAL_COLORS["residual"], linewidth=0.7,
                     label=label, zorder=2)
         _line(ax, t, df, rows, f"eta_{s}", "eta", label="estimated fault (filtered)",

@@ -121,12 +121,22 @@ def _time(df: pd.DataFrame) -> np.ndarray:
     return t
 
 
+def _not_none(ser: pd.Series) -> np.ndarray:
+    """True where a text column holds a kind other than ``none``/empty/missing."""
+    blank = ["none", "None", "NONE", "", "nan"]
+    if isinstance(ser.dtype, pd.CategoricalDtype):  # decide per category, index by code
+        ok = ~pd.Index(ser.cat.categories).isin(blank)
+        codes = ser.cat.codes.to_numpy()
+        return np.append(ok, False)[np.where(codes < 0, ok.size, codes)]
+    bad = ser.isin(blank) | ser.isna()
+    return ~bad.to_numpy(dtype=bool)
+
+
 def fault_mask(df: pd.DataFrame, sensor: str) -> np.ndarray | None:
     """Boolean mask of the injected fault window of ``sensor``, or None if unknown."""
     kc, fc = f"fault_kind_{sensor}", f"fault_{sensor}"
     if kc in df.columns:
-        k = df[kc].astype(str).str.lower().to_numpy()
-        return (k != "none") & (k != "") & (k != "nan")
+        return _not_none(df[kc])
     if fc in df.columns:
         f = df[fc].to_numpy(dtype=float)
         return np.nan_to_num(f) != 0.0
@@ -152,12 +162,14 @@ def alarm_onsets(df: pd.DataFrame, sensor: str) -> np.ndarray:
     return t[np.flatnonzero(np.diff(f.astype(np.int8), prepend=0) == 1)]
 
 
-def _mode(values: np.ndarray) -> str:
-    v = [str(x) for x in values if str(x).lower() not in ("none", "", "nan")]
-    if not v:
+def _mode(ser: pd.Series, mask: np.ndarray) -> str:
+    """Most frequent kind other than ``none`` among the masked samples of a text column."""
+    sub = ser[mask]
+    sub = sub[_not_none(sub)]
+    if sub.empty:
         return "none"
-    u, c = np.unique(v, return_counts=True)
-    return str(u[np.argmax(c)])
+    counts = sub.value_counts()
+    return str(counts.index[0])
 
 
 def _rmse(a: np.ndarray) -> float:
@@ -182,11 +194,11 @@ def _fallback(df: pd.DataFrame, t: np.ndarray, s: str) -> dict[str, Any]:
         row["injected_kind"] = "none"
     else:
         kc = f"fault_kind_{s}"
-        row["injected_kind"] = _mode(df[kc].to_numpy()[fm]) if kc in df.columns else "fault"
+        row["injected_kind"] = _mode(df[kc], fm) if kc in df.columns else "fault"
     kc = f"kind_{s}"
     if kc in df.columns and flag.any():
         scope = flag & fm if injected and (flag & fm).any() else flag
-        row["detected_kind"] = _mode(df[kc].to_numpy()[scope])
+        row["detected_kind"] = _mode(df[kc], scope)
     else:
         row["detected_kind"] = "none" if has_flag else "n/a"
     if injected:
