@@ -1,0 +1,156 @@
+"""Detector thresholds: a frozen, validated dataclass with a TOML round trip.
+
+The shipped defaults (``default_thresholds.toml`` next to this module) were calibrated
+by ``benchmarks/calibrate_default_thresholds.py`` on fault-free simulated walks whose
+seeds are not used by the tests. :func:`grfguard.detect.monitor.calibrate_thresholds`
+makes new ones from your own fault-free logs.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, fields, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from grfguard.errors import ConfigError
+
+__all__ = ["Thresholds", "default_thresholds", "DEFAULT_THRESHOLDS_FILE"]
+
+DEFAULT_THRESHOLDS_FILE = "default_thresholds.toml"
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Every threshold of the default detector and of the paper's method.
+
+    Residuals are normalised per phase: swing readings by the sensor noise ``sigma_swing_n``
+    (the true force is exactly zero in swing), stance residuals by a fraction of the
+    robot's weight (so one threshold fits gaits and robot sizes). CUSUM drift allowances
+    ``*_kappa`` are in σ, thresholds ``*_h`` in σ·samples.
+
+    Attributes:
+        sigma_swing_n: Noise of a sole sensor in swing [N].
+        swing_kappa: Swing CUSUM drift allowance [σ].
+        swing_h: Swing CUSUM threshold [σ·samples].
+        total_sigma: Scale of the foot-total residual in clean single support [fraction of
+            the weight].
+        total_kappa: Foot-total CUSUM drift allowance [σ].
+        total_h: Foot-total CUSUM threshold [σ·samples].
+        corner_sigma: Scale of a per-corner residual in clean single support [fraction of
+            the weight].
+        corner_kappa: Corner CUSUM drift allowance [σ].
+        corner_h: Corner CUSUM threshold [σ·samples].
+        const_samples: Identical consecutive readings of a loaded sensor that mean frozen.
+        paper_eta_n: Eq. 33 thresholds on the low-passed η̂ of the paper's method, one per
+            sensor r1..r4, l1..l4 [N].
+        false_alarm_rate_per_hour: The target rate they were calibrated for [1/h].
+        source: Free text: where they come from.
+    """
+
+    sigma_swing_n: float = 2.0
+    swing_kappa: float = 3.0
+    swing_h: float = 60.0
+    total_sigma: float = 0.01
+    total_kappa: float = 3.0
+    total_h: float = 300.0
+    corner_sigma: float = 0.03
+    corner_kappa: float = 3.0
+    corner_h: float = 300.0
+    const_samples: int = 25
+    paper_eta_n: tuple[float, ...] = (100.0,) * 8
+    false_alarm_rate_per_hour: float = 0.1
+    source: str = "builtin"
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "source":
+                if not isinstance(v, str):
+                    raise ConfigError(f"thresholds.source must be text, got {v!r}")
+                continue
+            if f.name == "paper_eta_n":
+                try:
+                    t = tuple(float(x) for x in v)
+                except (TypeError, ValueError):
+                    raise ConfigError(
+                        f"thresholds.paper_eta_n must be 8 numbers [N], got {v!r}"
+                    ) from None
+                if len(t) != 8 or not all(x > 0 for x in t):
+                    raise ConfigError(
+                        f"thresholds.paper_eta_n must be 8 numbers > 0 [N], got {v!r}"
+                    )
+                object.__setattr__(self, f.name, t)
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v):
+                raise ConfigError(f"thresholds.{f.name} must be a number, got {v!r}")
+            lo = 0.0 if f.name.endswith("kappa") else 1e-12
+            if not (v >= lo):
+                raise ConfigError(f"thresholds.{f.name} = {v!r} must be >= {lo}")
+        if int(self.const_samples) != self.const_samples or self.const_samples < 2:
+            raise ConfigError(
+                f"thresholds.const_samples = {self.const_samples!r} must be an integer >= 2"
+            )
+        object.__setattr__(self, "const_samples", int(self.const_samples))
+
+    def replace(self, **changes: Any) -> Thresholds:
+        """Copy with some fields changed (validated)."""
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (``paper_eta_n`` as a list)."""
+        d = asdict(self)
+        d["paper_eta_n"] = list(self.paper_eta_n)
+        return d
+
+    def to_toml(self) -> str:
+        """TOML text with a ``[thresholds]`` table."""
+        lines = ["[thresholds]"]
+        for k, v in self.to_dict().items():
+            if isinstance(v, str):
+                lines.append(f'{k} = "{v}"')
+            elif isinstance(v, list):
+                lines.append(f"{k} = [{', '.join(repr(float(x)) for x in v)}]")
+            elif isinstance(v, float) and math.isinf(v):
+                lines.append(f"{k} = inf")
+            else:
+                lines.append(f"{k} = {v!r}")
+        return "\n".join(lines) + "\n"
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Thresholds:
+        """From a dict (unknown keys are an error)."""
+        names = {f.name for f in fields(cls)}
+        extra = set(data) - names
+        if extra:
+            raise ConfigError(f"unknown threshold keys {sorted(extra)}; allowed {sorted(names)}")
+        return cls(**data)
+
+    @classmethod
+    def from_toml_text(cls, text: str) -> Thresholds:
+        """Parse TOML text with a ``[thresholds]`` table (or top-level keys)."""
+        try:
+            doc = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"thresholds TOML is not valid TOML: {exc}") from exc
+        return cls.from_dict(doc.get("thresholds", doc))
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Thresholds:
+        """Read a thresholds TOML file (as written by ``grfguard calibrate``)."""
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"thresholds file {str(p)!r} does not exist; make one with "
+                              "`grfguard calibrate`")
+        return cls.from_toml_text(p.read_text())
+
+
+def default_thresholds() -> Thresholds:
+    """The shipped thresholds (package data), or the built-in values if it is missing."""
+    try:
+        text = resources.files("grfguard.detect").joinpath(DEFAULT_THRESHOLDS_FILE).read_text()
+    except (FileNotFoundError, OSError):
+        return Thresholds()
+    return Thresholds.from_toml_text(text)

@@ -1,0 +1,57 @@
+"""Signal reconstruction of faulty sole sensors.
+
+- additive faults (offset, drift): ``N_rec = N_meas - η̂``;
+- gain: ``N_rec = N_meas / ĝ``;
+- sensors that carry no information (frozen, stuck, dropout, clipped, noisy): the
+  virtual sensor, corrected in clean single support by the foot-total balance
+  ``N_rec,i = F_z,foot - Σ_{j≠i} N_j`` (the foot total of the VFS is far more precise
+  than its corners); the correction ``δ = N_rec,i - N̂_i`` is tracked with a short time
+  constant in single support and decays slowly elsewhere, so hand-overs are smooth;
+- the output blends from the measurement to the reconstruction (and back) with a first
+  order ramp, and is never NaN.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["foot_balance", "HandOver"]
+
+
+def foot_balance(total_n: float, others_n: list[float]) -> float:
+    """Force of one corner from the foot total minus the other corners, clipped at 0 [N]."""
+    v = total_n - math.fsum(others_n)
+    return v if v > 0.0 else 0.0
+
+
+class HandOver:
+    """First-order blend weight ``w`` between measurement (0) and reconstruction (1).
+
+    Args:
+        tau_s: Time constant of the blend [s].
+        dt_s: Sampling period [s].
+    """
+
+    def __init__(self, tau_s: float = 0.03, dt_s: float = 1e-3) -> None:
+        self.alpha = min(1.0, dt_s / tau_s) if tau_s > 0 else 1.0
+        self.w = 0.0
+
+    def reset(self) -> None:
+        """Back to the measurement."""
+        self.w = 0.0
+
+    def update(self, target: float) -> float:
+        """Move ``w`` toward ``target`` (0 or 1) and return it."""
+        self.w += (target - self.w) * self.alpha
+        return self.w
+
+    @staticmethod
+    def mix(w: float, measured_n: float, reconstructed_n: float, fallback_n: float) -> float:
+        """``(1-w)·measured + w·reconstructed``; NaN inputs fall back, never NaN out [N]."""
+        if not math.isfinite(reconstructed_n):
+            reconstructed_n = fallback_n
+        if not math.isfinite(measured_n):
+            return reconstructed_n
+        if w <= 1e-12:
+            return measured_n
+        return (1.0 - w) * measured_n + w * reconstructed_n
