@@ -400,7 +400,9 @@ def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
     for k in keys:
         v = _jsonable(df.attrs[k])
         if isinstance(v, (dict, list)):
-            text = json.dumps(v, indent=1, sort_keys=True, default=str)
+            text = json.dumps(v, sort_keys=True, default=str)
+            if len(text) > 90:
+                text = json.dumps(v, indent=1, sort_keys=True, default=str)
             if len(text) > 4000:
                 text = text[:4000] + "\n..."
             rows.append((k, f"<pre>{_html.escape(text)}</pre>"))
