@@ -110,43 +110,72 @@ def zmp_from_momentum(
     return np.stack([px, py], axis=-1)
 
 
-class LegOdometry:
-    """Trunk position in world by leg odometry, anchored on a flat stance foot.
+def _so3_exp(w: np.ndarray) -> np.ndarray:
+    th = float(np.sqrt(w @ w))
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if th < 1e-9:
+        return np.eye(3) + K
+    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * (K @ K)
 
-    The anchor foot's sole centre is fixed in world while anchored. The anchor moves to the
-    other foot when that foot is planned in stance and flat on the ground (all its corners
-    within ``contact_height`` of the ground), or when the anchor foot leaves its planned
-    stance while the other one is in it. The switch is continuous: the new anchor's world
-    position is computed with the current trunk position. The ground height is the lowest
-    contact point of the anchor foot. At the first sample the mid-point of the planned
-    stance feet is put at ``x = y = 0`` and the ground at ``z = 0``.
+
+def _so3_log_small(R: np.ndarray) -> np.ndarray:
+    return 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+
+
+class LegOdometry:
+    """Trunk pose in world by leg odometry, anchored on a flat stance foot.
+
+    The anchor foot's sole frame is fixed in world while anchored (a foot flat on the ground
+    neither slides nor turns). Its orientation ``R_WS_anchor`` replaces the IMU attitude at
+    high frequency: the whole kinematic chain is rotated by ``R_corr = R_WS_anchor R_WS^T``
+    (``R_WS`` is the sole orientation the kinematics computed with the IMU attitude), so the
+    trunk attitude becomes ``R_WS_anchor R_ST(q)`` (encoders only, no attitude jitter). The
+    anchor orientation is pulled toward the IMU-based one with ``attitude_time_constant``
+    (drift correction; 0 disables the anchor attitude and uses the IMU as is).
+
+    The anchor moves to the other foot when that foot is planned in stance and flat on the
+    ground (all its corners within ``contact_height`` of the ground), or when the anchor
+    foot leaves its planned stance while the other is in it. The switch is continuous: the
+    new anchor's pose is computed with the current corrected trunk pose. The ground height
+    is the lowest contact point of the anchor foot. At the first sample the mid-point of the
+    planned stance feet is put at ``x = y = 0`` and the ground at ``z = 0``.
 
     Args:
         contact_height: Corner height above the ground that still counts as touching [m].
+        dt_s: Sampling period [s].
+        attitude_time_constant: Drift correction time constant toward the IMU [s].
     """
 
-    def __init__(self, contact_height: float = 0.003) -> None:
+    def __init__(
+        self, contact_height: float = 0.003, dt_s: float = 0.001,
+        attitude_time_constant: float = 1.0,
+    ) -> None:
         self.contact_height = contact_height
+        self.use_anchor_attitude = attitude_time_constant > 0
+        self.k_att = dt_s / (attitude_time_constant + dt_s) if self.use_anchor_attitude else 0.0
         self.reset()
 
     def reset(self) -> None:
         """Forget the anchor."""
         self.anchor: int = -1
         self.p_W_anchor = np.zeros(3)
+        self.R_WS_anchor = np.eye(3)
 
     def update(
-        self, p_AK: np.ndarray, p_AS: np.ndarray, stance: Sequence[bool]
-    ) -> tuple[np.ndarray, float, int]:
+        self, p_AK: np.ndarray, p_AS: np.ndarray, R_WS: np.ndarray, stance: Sequence[bool]
+    ) -> tuple[np.ndarray, np.ndarray, float, int]:
         """One sample.
 
         Args:
-            p_AK: (8, 3) contact points in frame A (trunk origin, world axes) [m].
+            p_AK: (8, 3) contact points in frame A (trunk origin, IMU attitude) [m].
             p_AS: (2, 3) sole centres in A [m].
+            R_WS: (2, 3, 3) sole orientations from the IMU attitude.
             stance: planned stance of (right, left).
 
         Returns:
-            ``(p_WT, ground_z, anchor)``: trunk position in world [m], ground height [m],
-            anchor foot index (0 right, 1 left).
+            ``(R_corr, p_WT, ground_z, anchor)``: rotation to apply to every A-frame vector
+            and orientation, trunk position in world [m], ground height [m], anchor foot
+            index (0 right, 1 left).
         """
         st = [bool(stance[0]), bool(stance[1])]
         if self.anchor < 0:
@@ -161,17 +190,26 @@ class LegOdometry:
             mid = p_AS[feet].mean(axis=0)
             z0 = p_AK[4 * self.anchor : 4 * self.anchor + 4, 2].min()
             # trunk at (-mid_x, -mid_y, -z0): mid-point at the origin, anchor on z = 0
-            p_WT = np.array([-mid[0], -mid[1], -z0])
-            self.p_W_anchor = p_WT + p_AS[self.anchor]
+            p_WT0 = np.array([-mid[0], -mid[1], -z0])
+            self.p_W_anchor = p_WT0 + p_AS[self.anchor]
+            self.R_WS_anchor = R_WS[self.anchor].copy()
         a = self.anchor
-        p_WT = self.p_W_anchor - p_AS[a]
-        ground = p_WT[2] + p_AK[4 * a : 4 * a + 4, 2].min()
+        if self.use_anchor_attitude:
+            err = _so3_log_small(self.R_WS_anchor.T @ R_WS[a])
+            self.R_WS_anchor = self.R_WS_anchor @ _so3_exp(self.k_att * err)
+            R_corr = self.R_WS_anchor @ R_WS[a].T
+        else:
+            R_corr = np.eye(3)
+        p_WT = self.p_W_anchor - R_corr @ p_AS[a]
+        zK = p_WT[2] + p_AK @ R_corr[2]
+        ground = float(zK[4 * a : 4 * a + 4].min())
         o = 1 - a
-        flat_other = p_WT[2] + p_AK[4 * o : 4 * o + 4, 2].max() - ground < self.contact_height
+        flat_other = zK[4 * o : 4 * o + 4].max() - ground < self.contact_height
         if st[o] and (flat_other or not st[a]):
             self.anchor = o
-            self.p_W_anchor = p_WT + p_AS[o]
-        return p_WT, float(ground), a
+            self.p_W_anchor = p_WT + R_corr @ p_AS[o]
+            self.R_WS_anchor = R_corr @ R_WS[o]
+        return R_corr, p_WT, ground, a
 
 
 def lipm_kalman_matrices(

@@ -73,6 +73,10 @@ class VFSConfig:
     #: Time constant of the complementary attitude filter (gyro integration pulled toward
     #: the logged IMU quaternion) in [s]; 0 uses the logged quaternion as is.
     attitude_time_constant: float = 0.5
+    #: Time constant with which the anchored stance foot's orientation (which replaces the
+    #: IMU attitude at high frequency) is pulled toward the IMU attitude in [s]; 0 uses
+    #: the IMU attitude directly.
+    anchor_attitude_time_constant: float = 0.0
     #: Include the centroidal angular momentum rate in the ZMP (multibody only).
     use_angular_momentum: bool = True
     #: Corner height above the ground plane below which a corner counts as touching, in [m]
@@ -117,6 +121,7 @@ class VFSConfig:
             if not isinstance(getattr(self, flag), bool):
                 raise ConfigError(f"vfs.{flag} must be true or false, got {getattr(self, flag)!r}")
         _num("attitude_time_constant", self.attitude_time_constant, 0.0, 1e3, "s")
+        _num("anchor_attitude_time_constant", self.anchor_attitude_time_constant, 0.0, 1e3, "s")
         _num("contact_height", self.contact_height, 0.0, 0.1, "m")
         _num("lipm_height", self.lipm_height, 0.0, 5.0, "m")
         _num("paper_process_noise", self.paper_process_noise, 1e-12, 1e12, "m^2/s^5")

@@ -20,7 +20,10 @@ import numpy as np
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINT_NAMES, SIDES, RobotConfig
 
-__all__ = ["KinematicModel", "KinematicFrames", "angular_momentum_about_com", "quat_to_matrix"]
+__all__ = [
+    "rotate_frames",
+    "AttitudeFilter",
+    "KinematicModel", "KinematicFrames", "angular_momentum_about_com", "quat_to_matrix"]
 
 
 def quat_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
@@ -303,3 +306,35 @@ class AttitudeFilter:
         q = q / np.sqrt(q @ q)
         self.q = q
         return q.copy()
+
+
+def rotate_frames(fr: KinematicFrames, R: np.ndarray) -> KinematicFrames:
+    """Rotate every vector and orientation of ``fr`` by ``R`` ((3, 3) or (T, 3, 3))."""
+    R = np.asarray(R, float)
+    if R.ndim == 2:
+
+        def vec(x: np.ndarray) -> np.ndarray:
+            return x @ R.T
+
+        def rot(x: np.ndarray) -> np.ndarray:
+            return R @ x
+
+    else:
+
+        def vec(x: np.ndarray) -> np.ndarray:
+            if x.ndim == 2:
+                return np.einsum("tij,tj->ti", R, x)
+            return np.einsum("tij,tkj->tki", R, x)
+
+        def rot(x: np.ndarray) -> np.ndarray:
+            return np.einsum("tij,tkjl->tkil", R, x)
+
+    return KinematicFrames(
+        p_AC=vec(fr.p_AC),
+        p_AB=vec(fr.p_AB),
+        R_WB=rot(fr.R_WB),
+        p_AK=vec(fr.p_AK),
+        p_AS=vec(fr.p_AS),
+        R_WS=rot(fr.R_WS),
+        p_AI=vec(fr.p_AI),
+    )

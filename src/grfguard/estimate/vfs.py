@@ -41,6 +41,7 @@ from grfguard.estimate.kinematic import (
     KinematicModel,
     angular_momentum_about_com,
     quat_to_matrix,
+    rotate_frames,
 )
 from grfguard.estimate.legs import (
     corner_contact,
@@ -182,7 +183,7 @@ class VirtualForceSensor:
     def reset(self) -> None:
         """Forget all state (odometry anchor, filters, previous samples)."""
         c = self.config
-        self._odo = LegOdometry(c.contact_height)
+        self._odo = LegOdometry(c.contact_height, c.dt, c.anchor_attitude_time_constant)
         self._att = AttitudeFilter(c.dt, c.attitude_time_constant)
         self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 9)
         self._lp_fuse = CausalLowPass(c.fusion_cutoff, c.dt, c.filter_order, 3)
@@ -258,7 +259,8 @@ class VirtualForceSensor:
         quat = self._att.update(quat, gyro)
         fr = self.kin.forward(q, quat)
         st = (stance > 0.5) if stance is not None else self._stance_fallback(fr.p_AK)
-        p_WT, ground, _ = self._odo.update(fr.p_AK, fr.p_AS, st)
+        R_corr, p_WT, ground, _ = self._odo.update(fr.p_AK, fr.p_AS, fr.R_WS, st)
+        fr = rotate_frames(fr, R_corr)
         com_W = p_WT + fr.p_AC
         p_WK = p_WT[None, :] + fr.p_AK
         if c.com_method == "multibody":
@@ -450,11 +452,13 @@ class VirtualForceSensor:
             st = self._stance_fallback(fr.p_AK)
         p_WT = np.empty((m, 3))
         ground = np.empty(m)
+        R_corr = np.empty((m, 3, 3))
         odo = self._odo
         for i in range(m):
-            p, gz, _ = odo.update(fr.p_AK[i], fr.p_AS[i], st[i])
-            p_WT[i] = p
-            ground[i] = gz
+            R_corr[i], p_WT[i], ground[i], _ = odo.update(
+                fr.p_AK[i], fr.p_AS[i], fr.R_WS[i], st[i]
+            )
+        fr = rotate_frames(fr, R_corr)
         com_W = p_WT + fr.p_AC
         p_WK = p_WT[:, None, :] + fr.p_AK
         dt = c.dt
