@@ -62,6 +62,9 @@ class GaitConfig:
         preview_dt: Sampling period of the preview controller in [s].
         preview_horizon: Preview horizon in [s].
         com_iterations: Pelvis corrections that make the model CoM follow the plan.
+        zmp_passes: Second-stage preview passes that correct the CoM plan so the
+            multibody ZMP (swing legs included) follows the reference (0 = cart-table
+            plan only).
     """
 
     step_length: float = 0.12
@@ -75,6 +78,7 @@ class GaitConfig:
     preview_dt: float = 0.005
     preview_horizon: float = 1.6
     com_iterations: int = 3
+    zmp_passes: int = 1
 
     def __post_init__(self) -> None:
         o = "gait"
@@ -93,6 +97,10 @@ class GaitConfig:
         if not isinstance(self.com_iterations, int) or not 0 <= self.com_iterations <= 20:
             raise ConfigError(
                 f"gait.com_iterations = {self.com_iterations!r} must be an integer in [0, 20]"
+            )
+        if not isinstance(self.zmp_passes, int) or not 0 <= self.zmp_passes <= 5:
+            raise ConfigError(
+                f"gait.zmp_passes = {self.zmp_passes!r} must be an integer in [0, 5]"
             )
         if abs(self.preview_dt / 0.001 - round(self.preview_dt / 0.001)) > 1e-9:
             raise ConfigError(

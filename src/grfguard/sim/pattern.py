@@ -21,9 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+from scipy.interpolate import CubicSpline
 
 from grfguard.errors import ConfigError
-from grfguard.model.kinematics import center_of_mass, leg_ik
+from grfguard.model.kinematics import body_poses, center_of_mass, leg_ik
+from grfguard.model.mjcf import body_layout
 from grfguard.model.robot import SIDES, RobotConfig
 from grfguard.sim.config import GaitConfig
 
@@ -36,6 +38,7 @@ __all__ = [
     "preview_gains",
     "preview_control",
     "plan_walk",
+    "multibody_zmp",
 ]
 
 #: Sample rate of the plan, the simulation and the log in [Hz].
@@ -167,7 +170,12 @@ def preview_gains(
 
 
 def preview_control(
-    zmp_ref: np.ndarray, dt: float, com_height: float, gravity: float, horizon: float
+    zmp_ref: np.ndarray,
+    dt: float,
+    com_height: float,
+    gravity: float,
+    horizon: float,
+    start: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """CoM trajectory tracking a ZMP reference with preview control.
 
@@ -178,6 +186,7 @@ def preview_control(
         com_height: Cart-table height in [m].
         gravity: g in [m/s^2].
         horizon: Preview horizon in [s].
+        start: Initial CoM position (at rest) in [m]; None starts on ``zmp_ref[0]``.
 
     Returns:
         ``(states, jerk)``: CoM (position, velocity, acceleration) at each sample,
@@ -193,7 +202,7 @@ def preview_control(
     f = win[:k_n] @ g_d  # (K, d)
     cz = com_height / gravity
     x = np.zeros((3, d))
-    x[0] = p[0]
+    x[0] = p[0] if start is None else start
     states = np.empty((k_n, 3, d))
     jerk = np.empty((k_n, d))
     a = A.tolist()
@@ -294,13 +303,31 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     kp_a = np.asarray(kp)
     zmp = np.column_stack([np.interp(t, kt_a, kp_a[:, 0]), np.interp(t, kt_a, kp_a[:, 1])])
 
-    # ---- preview control on its own grid, then exact (constant-jerk) 1 kHz resampling
+    # ---- feet at the 1 kHz samples and on the preview grid
     dtp = gait.preview_dt
     sub = int(round(dtp / _DT))
     n_p = (n_t + sub - 1) // sub + 1
     tp = np.arange(n_p) * dtp
+    sole, contact = _feet(t, footsteps, swing, gait)
+    sole_p, _ = _feet(tp, footsteps, swing, gait)
+
+    # ---- preview control on its grid. Stage 1: cart-table model. Stage 2 (Kajita's
+    # two-stage scheme, ``gait.zmp_passes`` times): the multibody ZMP of the planned
+    # motion (legs included) is computed, and the preview controller run on the ZMP
+    # error shifts the CoM plan so the multibody ZMP follows the reference.
     zmp_p = np.column_stack([np.interp(tp, kt_a, kp_a[:, 0]), np.interp(tp, kt_a, kp_a[:, 1])])
     states, jerk = preview_control(zmp_p, dtp, zc, g, gait.preview_horizon)
+    pelvis_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
+    for pass_i in range(gait.zmp_passes + 1):
+        com_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
+        pelvis_p, q_p = _pelvis_for_com(robot, com_p, sole_p, gait.com_iterations, pelvis_p)
+        if pass_i == gait.zmp_passes:
+            break
+        err = zmp_p - multibody_zmp(robot, tp, pelvis_p, q_p)
+        d_states, d_jerk = preview_control(err, dtp, zc, g, gait.preview_horizon, start=0.0)
+        states, jerk = states + d_states, jerk + d_jerk
+
+    # exact (constant-jerk) resampling of the CoM to 1 kHz
     k = np.arange(n_t) // sub
     tau = (t - k * dtp)[:, None]
     c0, c1, c2, u = states[k, 0], states[k, 1], states[k, 2], jerk[k]
@@ -309,43 +336,12 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     com_ref = np.column_stack([com_xy, np.full(n_t, zc)])
     com_vel_ref = np.column_stack([vel_xy, np.zeros(n_t)])
 
-    # ---- feet: step index j(t) in 1..n and single-support phase s in [0, 1]
-    sole = np.zeros((2, n_t, 3))
-    contact = np.ones((n_t, 2), dtype=np.int8)
-    if n > 0:
-        j_idx = np.clip(np.floor((t - ts) / T).astype(int) + 1, 1, n)
-        t_ss0 = ts + (j_idx - 1) * T + Tds
-        s = np.clip((t - t_ss0) / (T - Tds), 0.0, 1.0)
-        s = np.where(t < ts, 0.0, s)
-        s_h = _smooth(np.clip((s - 0.1) / 0.8, 0.0, 1.0))
-        bump = 64.0 * s**3 * (1.0 - s) ** 3
-        in_ss = (s > 0.0) & (s < 1.0)
-        for i in range(2):
-            a = footsteps[i, j_idx - 1]
-            b = footsteps[i, j_idx]
-            sole[i, :, :2] = a + (b - a) * s_h[:, None]
-            swinging = swing[j_idx - 1] == i
-            sole[i, :, 2] = np.where(swinging, gait.swing_height * bump, 0.0)
-            contact[:, i] = np.where(swinging & in_ss, 0, 1)
-    else:
-        sole[:, :, :2] = footsteps[:, 0][:, None, :]
-
-    # ---- pelvis: make the multibody CoM follow the plan. The corrections run on the
-    # preview grid (every ``sub`` samples); the smooth pelvis-minus-CoM offset is then
-    # interpolated to 1 kHz (error checked below, midway between grid points).
+    # ---- pelvis at 1 kHz: the smooth pelvis-minus-CoM offset of the grid, cubic spline
     eye = np.eye(3)
-    grid = np.unique(np.append(np.arange(0, n_t, sub), n_t - 1))
-    com_g, sole_g = com_ref[grid], sole[:, grid]
-    pelvis_g = com_g.copy()
-    q_g = _ik_both(robot, pelvis_g, sole_g)
-    pelvis_g = pelvis_g - (center_of_mass(robot, pelvis_g, eye, q_g) - pelvis_g)
-    for _ in range(gait.com_iterations):
-        q_g = _ik_both(robot, pelvis_g, sole_g)
-        pelvis_g = pelvis_g + (com_g - center_of_mass(robot, pelvis_g, eye, q_g))
-    offset_g = pelvis_g - com_g
-    pelvis = com_ref + np.column_stack([np.interp(t, t[grid], offset_g[:, a]) for a in range(3)])
+    offset = CubicSpline(tp, pelvis_p - np.column_stack([states[:, 0], np.full(n_p, zc)]))(t)
+    pelvis = com_ref + offset
     q = _ik_both(robot, pelvis, sole)
-    check = np.concatenate([grid, np.clip(grid + sub // 2, 0, n_t - 1)])
+    check = np.arange(sub // 2, n_t, sub)
     com_err = float(
         np.abs(center_of_mass(robot, pelvis[check], eye, q[check]) - com_ref[check]).max()
     )
@@ -372,6 +368,101 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
         step_times=step_times,
         com_model_error=com_err,
     )
+
+
+def _feet(
+    t: np.ndarray, footsteps: np.ndarray, swing: np.ndarray, gait: GaitConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sole positions (2, T, 3) [m] and planned contact (T, 2) at times ``t`` [s].
+
+    Step j (1..n) starts at ``start_time + (j - 1) * step_period``; its single-support
+    phase ``s`` runs 0 -> 1 after the double support. The swing sole rises with
+    ``64 s^3 (1 - s)^3`` (zero velocity and acceleration at lift-off and touchdown) and
+    moves forward with a quintic over ``s`` in [0.1, 0.9].
+    """
+    n = swing.size
+    T, Tds, ts = gait.step_period, gait.double_support_time, gait.start_time
+    sole = np.zeros((2, t.size, 3))
+    contact = np.ones((t.size, 2), dtype=np.int8)
+    if n == 0:
+        sole[:, :, :2] = footsteps[:, 0][:, None, :]
+        return sole, contact
+    j_idx = np.clip(np.floor((t - ts) / T).astype(int) + 1, 1, n)
+    t_ss0 = ts + (j_idx - 1) * T + Tds
+    s = np.clip((t - t_ss0) / (T - Tds), 0.0, 1.0)
+    s = np.where(t < ts, 0.0, s)
+    s_h = _smooth(np.clip((s - 0.1) / 0.8, 0.0, 1.0))
+    bump = 64.0 * s**3 * (1.0 - s) ** 3
+    in_ss = (s > 0.0) & (s < 1.0)
+    for i in range(2):
+        a = footsteps[i, j_idx - 1]
+        b = footsteps[i, j_idx]
+        sole[i, :, :2] = a + (b - a) * s_h[:, None]
+        swinging = swing[j_idx - 1] == i
+        sole[i, :, 2] = np.where(swinging, gait.swing_height * bump, 0.0)
+        contact[:, i] = np.where(swinging & in_ss, 0, 1)
+    return sole, contact
+
+
+def _pelvis_for_com(
+    robot: RobotConfig,
+    com: np.ndarray,
+    sole: np.ndarray,
+    iterations: int,
+    pelvis0: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pelvis positions (T, 3) [m] whose multibody CoM is ``com``, and the joints (T, 12).
+
+    Fixed-point iteration ``pelvis += com - CoM(pelvis)`` starting from ``pelvis0``
+    shifted by the CoM error of ``pelvis0``.
+    """
+    eye = np.eye(3)
+    pelvis = pelvis0.copy()
+    q = _ik_both(robot, pelvis, sole)
+    for _ in range(iterations + 1):
+        pelvis = pelvis + (com - center_of_mass(robot, pelvis, eye, q))
+        q = _ik_both(robot, pelvis, sole)
+    return pelvis, q
+
+
+def multibody_zmp(
+    robot: RobotConfig, t: np.ndarray, p_WB: np.ndarray, q: np.ndarray,
+    R_WB: np.ndarray | None = None,
+) -> np.ndarray:
+    """ZMP on flat ground (z = 0) of a kinematic trajectory of the multibody model [m].
+
+    ``p_x = (sum_i m_i ((z_i'' + g) x_i - x_i'' z_i) - sum_i Ldot_iy) / sum_i m_i (z_i'' + g)``
+    and ``p_y`` with ``+ Ldot_ix``, where ``(x_i, y_i, z_i)`` is body i's CoM and
+    ``Ldot_i`` the rate of its angular momentum about its CoM; derivatives by central
+    differences over ``t``.
+
+    Args:
+        robot: The robot description.
+        t: Sample times [s], (T,), increasing.
+        p_WB: Trunk position in world [m], (T, 3).
+        q: Joint angles [rad], (T, 12).
+        R_WB: Trunk orientation (T, 3, 3); upright when None.
+
+    Returns:
+        (T, 2) ZMP (x, y) in world [m].
+    """
+    poses = body_poses(robot, p_WB, np.eye(3) if R_WB is None else R_WB, q)
+    g = robot.gravity
+    num = np.zeros((t.size, 2))
+    den = np.zeros(t.size)
+    for spec in body_layout(robot):
+        p, R = poses[spec.name]
+        c = p + R @ np.asarray(spec.com_in_body)
+        a = np.gradient(np.gradient(c, t, axis=0), t, axis=0)
+        W = np.gradient(R, t, axis=0) @ np.swapaxes(R, 1, 2)
+        w = np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)
+        inertia = R @ np.diag(spec.inertia_diag) @ np.swapaxes(R, 1, 2)
+        L_dot = np.gradient(np.einsum("tij,tj->ti", inertia, w), t, axis=0)
+        fz = spec.mass * (a[:, 2] + g)
+        den += fz
+        num[:, 0] += fz * c[:, 0] - spec.mass * a[:, 0] * c[:, 2] - L_dot[:, 1]
+        num[:, 1] += fz * c[:, 1] - spec.mass * a[:, 1] * c[:, 2] + L_dot[:, 0]
+    return num / den[:, None]
 
 
 def _reach_all(robot: RobotConfig, pelvis: np.ndarray, sole: np.ndarray) -> np.ndarray:
