@@ -148,12 +148,12 @@ def inject(
 ) -> None:
     """Inject sensor faults into a log (writes fault_<s> / fault_kind_<s> truth columns)."""
     from grfguard.errors import FaultSpecError
-    from grfguard.faults import inject_faults, load_fault_file, parse_fault_spec
+    from grfguard.faults import inject_faults, load_faults, parse_fault_spec
     from grfguard.io.logio import read_log, write_log
 
     specs = [parse_fault_spec(s) for s in (fault or [])]
     if faults_file is not None:
-        specs.extend(load_fault_file(faults_file))
+        specs.extend(load_faults(faults_file))
     if not specs:
         raise FaultSpecError("no fault given: use --fault r2=offset:100@5 or --faults FILE.toml")
     df = read_log(log)
@@ -229,10 +229,31 @@ def evaluate_frame(df: Any) -> dict[str, Any]:
 
         result["vfs"] = evaluate_vfs(df)
     if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        from grfguard.evaluate.detection import evaluate_detection
-
-        result["detection"] = evaluate_detection(df)
+        result["detection"] = detection_metrics(df)
     return result
+
+
+def detection_metrics(df: Any) -> dict[str, Any]:
+    """Per-sensor detection metrics and their summary, as plain JSON-able dicts."""
+    import math
+
+    from grfguard.evaluate.detection import evaluate_detection, summarize_detection
+
+    table = evaluate_detection(df)
+    duration = float(df["time"].iloc[-1] - df["time"].iloc[0])
+
+    def clean(v: Any) -> Any:
+        if hasattr(v, "item"):
+            v = v.item()
+        if isinstance(v, float) and math.isnan(v):
+            return None
+        return v
+
+    sensors = {
+        str(s): {k: clean(v) for k, v in row.items()} for s, row in table.iterrows()
+    }
+    summary = {k: clean(v) for k, v in summarize_detection(table, duration).items()}
+    return {"sensors": sensors, "summary": summary}
 
 
 def _json_default(obj: Any) -> Any:
@@ -328,9 +349,7 @@ def report(
 
 def _detection_metrics_or_none(df: Any) -> Any:
     if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        from grfguard.evaluate.detection import evaluate_detection
-
-        return evaluate_detection(df)
+        return detection_metrics(df)["sensors"]
     return None
 
 

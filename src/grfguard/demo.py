@@ -86,13 +86,13 @@ def run_demo(
     report = write_html_report(
         runs["default"],
         out_dir / "report.html",
-        metrics=results["default"].get("detection"),
+        metrics=results["default"].get("detection", {}).get("sensors"),
         title="grfguard: the paper's scenario (default method)",
     )
     write_html_report(
         runs["paper"],
         out_dir / "report_paper.html",
-        metrics=results["paper"].get("detection"),
+        metrics=results["paper"].get("detection", {}).get("sensors"),
         title="grfguard: the paper's scenario (paper's method)",
     )
     _print_table(results, out)
@@ -144,10 +144,11 @@ def _json_default(obj: Any) -> Any:
 _DET_KEYS = (
     ("detected", "detected"),
     ("delay_s", "delay [s]"),
-    ("kind", "kind"),
+    ("kind_estimated", "kind"),
     ("kind_correct", "kind ok"),
     ("false_alarms", "false alarms"),
-    ("recovery_rmse", "recovery RMSE [N]"),
+    ("recovery_rmse_n", "recovery RMSE [N]"),
+    ("fault_size_error_n", "size error [N]"),
 )
 
 
