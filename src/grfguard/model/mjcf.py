@@ -20,7 +20,8 @@ Naming contract (everyone relies on it):
   ``robot.contact_radius`` whose bottom touches the sole plane);
 * sensors ``touch_{s}{k}``, ``imu_acc`` (accelerometer), ``imu_gyro`` (gyro),
   ``imu_quat`` (framequat of the imu site in world), ``jointpos_<joint>``, plus truth
-  sensors ``truth_com_pos``, ``truth_com_vel`` (trunk subtree = whole robot),
+  sensors ``truth_imu_linvel`` (world-frame velocity of the imu site),
+  ``truth_com_pos``, ``truth_com_vel`` (trunk subtree = whole robot),
   ``truth_base_pos``, ``truth_base_quat``, ``truth_sole_{s}_pos``,
   ``truth_sole_{s}_quat`` and ``truth_corner_{s}{k}_pos``;
 * position actuators named as the joints.
@@ -352,10 +353,11 @@ def build_mjcf(robot: RobotConfig) -> str:
     ]
     sensors += [f'    <jointpos name="jointpos_{j}" joint="{j}"/>' for j in joints]
     sensors += [
+        '    <framelinvel name="truth_imu_linvel" objtype="site" objname="imu"/>',
         '    <subtreecom name="truth_com_pos" body="trunk"/>',
         '    <subtreelinvel name="truth_com_vel" body="trunk"/>',
-        '    <framepos name="truth_base_pos" objtype="body" objname="trunk"/>',
-        '    <framequat name="truth_base_quat" objtype="body" objname="trunk"/>',
+        '    <framepos name="truth_base_pos" objtype="xbody" objname="trunk"/>',
+        '    <framequat name="truth_base_quat" objtype="xbody" objname="trunk"/>',
     ]
     for side in SIDES:
         sensors += [
