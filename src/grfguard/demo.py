@@ -52,6 +52,8 @@ def run_demo(
 
     console = console or Console(stderr=True)
     out = out or Console()
+    if not out.is_terminal:
+        out = Console(width=160)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
 
@@ -144,7 +146,7 @@ def _json_default(obj: Any) -> Any:
 _DET_KEYS = (
     ("detected", "detected"),
     ("delay_s", "delay [s]"),
-    ("kind_estimated", "kind"),
+    ("kind_estimated", "kind found"),
     ("kind_correct", "kind ok"),
     ("false_alarms", "false alarms"),
     ("recovery_rmse_n", "recovery RMSE [N]"),
@@ -153,11 +155,20 @@ _DET_KEYS = (
 
 
 def _rows(results: dict[str, Any]) -> list[list[str]]:
+    """One row per faulty sensor, plus one per healthy sensor that raised an alarm."""
     rows = []
     for method, res in results.items():
         det = res.get("detection", {}).get("sensors", {})
         for sensor, m in det.items():
-            rows.append([method, sensor] + [_fmt(m.get(k)) for k, _ in _DET_KEYS])
+            if m.get("faulty") or (m.get("false_alarms") or 0) > 0:
+                rows.append([method, sensor, str(m.get("fault_kind", "none"))]
+                            + [_fmt(m.get(k)) for k, _ in _DET_KEYS])
+        healthy_fa = sum(
+            (m.get("false_alarms") or 0) for m in det.values() if not m.get("faulty")
+        )
+        n_healthy = sum(1 for m in det.values() if not m.get("faulty"))
+        rows.append([method, f"{n_healthy} healthy", "none", "-", "-", "-", "-",
+                     str(healthy_fa), "-", "-"])
     return rows
 
 
@@ -170,7 +181,7 @@ def _fmt(v: Any) -> str:
 
 
 def _metrics_markdown(results: dict[str, Any]) -> str:
-    head = ["method", "sensor"] + [label for _, label in _DET_KEYS]
+    head = ["method", "sensor", "true kind"] + [label for _, label in _DET_KEYS]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(r) + " |" for r in _rows(results)]
     return "\n".join(lines) + "\n"
@@ -178,8 +189,8 @@ def _metrics_markdown(results: dict[str, Any]) -> str:
 
 def _print_table(results: dict[str, Any], out: Console) -> None:
     table = Table(title="the paper's scenario: detection and recovery")
-    for h in ["method", "sensor"] + [label for _, label in _DET_KEYS]:
-        table.add_column(h)
+    for h in ["method", "sensor", "true kind"] + [label for _, label in _DET_KEYS]:
+        table.add_column(h, no_wrap=True)
     for r in _rows(results):
         table.add_row(*r)
     out.print(table)
