@@ -68,7 +68,9 @@ class PageReport:
         console_errors: Console ``error`` messages, uncaught exceptions, log errors.
         blocked_requests: URLs of network requests the page tried (all failed).
         requests: Every request URL the page made (file:, data:, blob: included).
-        state: The value of ``window.grfguardReport`` plus DOM checks (see load_report).
+        state: The value of ``window.grfguardReport`` plus DOM checks and the page's own
+            timings in [ms] since navigation start (``domContentLoadedMs``,
+            ``loadEventMs``, ``readyAtMs``; see load_report).
         screenshot: Path of the full-page PNG screenshot, if one was taken.
     """
 
@@ -100,8 +102,11 @@ class ChromiumSession:
         def _child() -> None:  # runs in the child between fork and exec
             import fcntl
 
-            a = fcntl.fcntl(r_cmd, fcntl.F_DUPFD, 10)  # out of the way of 3 and 4 first
-            b = fcntl.fcntl(w_evt, fcntl.F_DUPFD, 10)
+            # Move both out of the way of 3 and 4 first (close-on-exec copies), then
+            # dup2 to 3 and 4 (inheritable). Everything else Python opened is
+            # non-inheritable (PEP 446), so close_fds=False leaks nothing.
+            a = fcntl.fcntl(r_cmd, fcntl.F_DUPFD_CLOEXEC, 10)
+            b = fcntl.fcntl(w_evt, fcntl.F_DUPFD_CLOEXEC, 10)
             os.dup2(a, 3)
             os.dup2(b, 4)
 
@@ -110,7 +115,7 @@ class ChromiumSession:
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
-            pass_fds=(3, 4, r_cmd, w_evt),  # 3 and 4 survive close_fds
+            close_fds=False,  # pass_fds would make the child close 3 and 4 again
             preexec_fn=_child,  # noqa: PLW1509 - single-threaded use in tests/benchmarks
         )
         os.close(r_cmd)
@@ -237,7 +242,11 @@ _STATE_JS = """
       width: r.width, height: r.height, top: r.top + window.scrollY,
     };
   });
+  const nav = performance.getEntriesByType('navigation')[0] || {};
   return {ready: !!s.ready, errors: s.errors || [], renderMs: s.renderMs ?? null,
+          readyAtMs: s.readyAtMs ?? null,
+          domContentLoadedMs: nav.domContentLoadedEventEnd ?? null,
+          loadEventMs: nav.loadEventEnd ?? null,
           figures: figs, summaryRows: document.querySelectorAll('#summary tbody tr').length,
           scriptSrcs: Array.from(document.querySelectorAll('script[src]')).map(e => e.src),
           pageHeight: document.documentElement.scrollHeight};

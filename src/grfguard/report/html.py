@@ -441,7 +441,7 @@ td:first-child{text-align:left;font-weight:600}
 
 _JS = """
 (function () {
-  var status = {ready: false, figures: [], errors: [], renderMs: null};
+  var status = {ready: false, figures: [], errors: [], renderMs: null, readyAtMs: null};
   window.grfguardReport = status;
   var specs = JSON.parse(document.getElementById('grfguard-data').textContent);
   var config = {responsive: true, displaylogo: false, scrollZoom: false,
@@ -456,6 +456,7 @@ _JS = """
   });
   chain.then(function () {
     status.renderMs = performance.now() - t0;
+    status.readyAtMs = performance.now();  // since navigation start (timeOrigin)
     status.ready = true;
     document.body.setAttribute('data-ready', '1');
   });
