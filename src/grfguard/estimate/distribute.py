@@ -94,8 +94,14 @@ PAPER_WEIGHT: float = 1e-2
 #: Relative KKT tolerance for accepting a free set.
 _TOL: float = 1e-12
 #: Samples per block in the batch solver (bounds temporary memory).
-_CHUNK: int = 1 << 16
-_POLISH = True
+_CHUNK: int = 4096
+#: Primal-dual active-set iterations before the primal method.
+_PDAS_ITER: int = 6
+#: Per-sample points: redo every final free-set solve in extended precision (double
+#: alone loses up to ~1e-6 relative when the CoP is unreachable and w is tiny).
+_POLISH_ALL: bool = True
+#: Pivot ratio below which a free-set solve is redone in extended precision.
+_ILL_CONDITIONED: float = 1e-4
 #: Active-set iterations of the batch solver before enumeration (None: 4 n + 4).
 _MAX_ITER: int | None = None
 #: Samples per block on the table path (fixed points): fits the cache.
@@ -252,15 +258,22 @@ def _check_zero_mask(zero_mask: Any, T: int, n: int) -> np.ndarray:
 # --------------------------------------------------------------------------- core algebra
 
 
-def _chol_solve(A: list[list[Any]], rhs: list[Any]) -> list[Any]:
-    """Solve symmetric positive-definite k × k systems given entry-wise as arrays (m,)."""
+def _chol_solve(A: list[list[Any]], rhs: list[Any]) -> tuple[list[Any], Any]:
+    """Solve symmetric positive-definite k × k systems given entry-wise as arrays (m,).
+
+    Returns the solution and the smallest pivot ratio ``L_jj² / A_jj`` (a cheap
+    conditioning indicator: rounding errors grow like its inverse).
+    """
     k = len(rhs)
     L: list[list[Any]] = [[0.0] * k for _ in range(k)]
+    ratio: Any = 1.0
     for j in range(k):
         acc = A[j][j]
         for p in range(j):
             acc = acc - L[j][p] * L[j][p]
         L[j][j] = np.sqrt(acc)
+        r_j = acc / A[j][j]
+        ratio = np.minimum(ratio, r_j)
         for i in range(j + 1, k):
             acc = A[i][j]
             for p in range(j):
@@ -278,7 +291,7 @@ def _chol_solve(A: list[list[Any]], rhs: list[Any]) -> list[Any]:
         for p in range(i + 1, k):
             acc = acc - L[p][i] * z[p]
         z[i] = acc / L[i][i]
-    return z
+    return z, ratio
 
 
 def _evaluate(
@@ -319,7 +332,8 @@ def _evaluate(
         b: (m, g) loads [N].
 
     Returns:
-        N (m, n) [N], λ (m, g) and μ (m, n) [N·m²] (μ = 0 on free points).
+        N (m, n) [N], λ (m, g) and μ (m, n) [N·m²] (μ = 0 on free points), and the
+        smallest Cholesky pivot ratio (m,) (conditioning indicator).
     """
     g = G.shape[0]
     w_min = float(w.min())
@@ -344,14 +358,14 @@ def _evaluate(
                 A[q][2 + j] = A[2 + j][q]
         A[2 + j][2 + j] = np.where(kj, A[2 + j][2 + j], 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = _chol_solve(A, rhs)
+        z, ratio = _chol_solve(A, rhs)
     h = X * z[0][:, None] + Y * z[1][:, None]
     for j in range(g):
         h = h + G[j] * z[2 + j][:, None]
     N = a * h
     mu = np.where(free, 0.0, -h * w_min)
     lam = np.stack(z[2:], axis=1) * w_min
-    return N, lam, mu
+    return N, lam, mu, ratio
 
 
 def _violation(
@@ -368,6 +382,36 @@ def _violation(
     return np.maximum(np.maximum(v_n, v_mu), 0.0)
 
 
+class _MapCache:
+    """Exact linear maps ``(d, b) → (N, λ, μ)`` of free sets for fixed points, lazily.
+
+    Computed once per free set in extended precision (:func:`_evaluate` on unit
+    inputs), so fixed-point solves need neither refactoring nor polishing.
+    """
+
+    def __init__(self, X: np.ndarray, Y: np.ndarray, w: np.ndarray, G: np.ndarray) -> None:
+        ld = np.longdouble
+        self.X, self.Y, self.w, self.G = X.astype(ld), Y.astype(ld), w.astype(ld), G.astype(ld)
+        self.n, self.g = G.shape[1], G.shape[0]
+        self.cache: dict[int, np.ndarray] = {}
+
+    def get(self, code: int) -> np.ndarray:
+        """(2n + g, 2 + g) map of the free set / kept rows in ``code``: rows N, λ, μ."""
+        B = self.cache.get(code)
+        if B is None:
+            n, g = self.n, self.g
+            k = 2 + g
+            free, kept = _decode(np.array([code], dtype=np.int64), n, g)
+            eye = np.eye(k, dtype=np.longdouble)
+            N, lam, mu, _ = _evaluate(
+                self.X, self.Y, self.w, self.G, np.repeat(free, k, axis=0),
+                np.repeat(kept, k, axis=0), eye[:, :2], eye[:, 2:],
+            )
+            B = np.concatenate([N, lam, mu], axis=1).T.astype(float)  # (2n + g, k)
+            self.cache[code] = B
+        return B
+
+
 class _Block:
     """Samples of one chunk: coordinates, targets, masks and KKT scales."""
 
@@ -381,9 +425,11 @@ class _Block:
         b: np.ndarray,
         forced: np.ndarray,
         kept: np.ndarray,
+        maps: _MapCache | None = None,
     ) -> None:
         self.X, self.Y, self.w, self.G = X, Y, w, G
         self.d, self.b, self.forced, self.kept = d, b, forced, kept
+        self.maps = maps
         p_scale = np.maximum(np.max(np.abs(X), axis=-1), np.max(np.abs(Y), axis=-1))
         p_scale = np.where(p_scale > 0.0, p_scale, 1.0)
         dn = np.max(np.abs(d), axis=1)
@@ -410,42 +456,101 @@ class _Block:
 
     def evaluate(
         self, sel: np.ndarray, free: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        X, Y = self.take(sel)
-        return _evaluate(X, Y, self.w, self.G, free, self.kept[sel], self.d[sel], self.b[sel])
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """N, λ, μ and pivot ratio of free sets ``free`` for samples ``sel``.
+
+        Fixed points: through the cached exact linear map of each free set (ratio 1, no
+        polishing needed). Per-sample points: :func:`_evaluate` in double precision.
+        """
+        if self.maps is None:
+            X, Y = self.take(sel)
+            return _evaluate(
+                X, Y, self.w, self.G, free, self.kept[sel], self.d[sel], self.b[sel]
+            )
+        n, g = self.G.shape[1], self.G.shape[0]
+        m = sel.size
+        x = np.concatenate([self.d[sel], self.b[sel]], axis=1)
+        codes = _encode(free, self.kept[sel])
+        uniq, inv = np.unique(codes, return_inverse=True)
+        out = np.empty((m, 2 * n + g))
+        if uniq.size == 1:
+            out[:] = np.einsum("tk,rk->tr", x, self.maps.get(int(uniq[0])))
+        else:
+            order = np.argsort(inv, kind="stable")
+            bounds = np.cumsum(np.bincount(inv, minlength=uniq.size))[:-1]
+            for code, part in zip(uniq.tolist(), np.split(order, bounds), strict=True):
+                out[part] = np.einsum("tk,rk->tr", x[part], self.maps.get(code))
+        N = np.where(free, out[:, :n], 0.0)
+        mu = np.where(free, 0.0, out[:, n + g :])
+        return N, out[:, n : n + g], mu, np.ones(m)
 
 
 def _solve_block(blk: _Block) -> tuple[np.ndarray, ...]:
-    """Primal active-set method, vectorized over samples, + enumeration fallback.
+    """Active-set solution of a block of samples, vectorized over samples.
 
-    Iterates stay feasible (``N ≥ 0``, ``G N = b``): a full step to the free-set
-    minimizer if it is non-negative, else a step to the first bound hit, which is then
-    held; when the minimizer is reached, the held point with the most negative
-    multiplier is released. Strict convexity makes this finite.
+    Phase 1, primal-dual active set (a few iterations): free set ← {N > 0} ∪ {μ < 0};
+    it usually lands on the optimum in 1-3 solves but can cycle. Phase 2, for the
+    samples left, the primal active-set method from a feasible start (each loaded
+    group's load spread evenly): a full step to the free-set minimizer if it is
+    non-negative, else a step to the first bound hit, which is then held; at the
+    minimizer the held point with the most negative multiplier is released. Strict
+    convexity makes phase 2 finite; samples still open after ``4 n + 4`` iterations
+    (degenerate cycling) are settled by enumerating every admissible free set.
+    A sample is accepted when its KKT conditions hold to a relative :data:`_TOL`.
+    Samples whose free-set system is ill-conditioned are solved again in extended
+    precision.
     """
     G, forced, kept = blk.G, blk.forced, blk.kept
     m, n = forced.shape
     sup = G > 0.0
     supf = sup.astype(float)
     grouped = sup.any(axis=0)
-    # feasible start: each kept group's load spread over its admissible points
     adm = ~forced & grouped[None, :]
-    denom = (adm * 1.0) @ G.T  # (m, g)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        share = np.where(kept, blk.b / denom, 0.0)
-    N = (share @ supf) * adm
-    free = adm.copy()
+    N = np.zeros((m, n))
     lam = np.zeros((m, G.shape[0]))
     mu = np.zeros((m, n))
     iters = np.zeros(m, dtype=np.int64)
-    todo = np.arange(m)
+    ill = np.zeros(m, dtype=bool)
     rows = np.arange(m)
-    max_iter = _MAX_ITER if _MAX_ITER is not None else 4 * n + 4
-    for it in range(1, max_iter + 1):
+    free = adm.copy()
+    todo = np.arange(m)
+    # ---------------------------------------------------------------- phase 1
+    for it in range(1, _PDAS_ITER + 1):
         if todo.size == 0:
             break
         f_t = free[todo]
-        Ns, lt, mt = blk.evaluate(todo, f_t)
+        Ns, lt, mt, rt = blk.evaluate(todo, f_t)
+        Nc = np.where(f_t, Ns, 0.0)
+        s_mu = blk.mu_scale(todo, Nc, lt)
+        viol = _violation(Ns, mt, f_t, ~forced[todo], blk.s_n[todo], s_mu)
+        done = viol <= _TOL
+        di = todo[done]
+        N[di] = np.maximum(Nc[done], 0.0)
+        lam[di], mu[di] = lt[done], mt[done]
+        iters[di] = it
+        ill[di] = rt[done] < _ILL_CONDITIONED
+        nd = ~done
+        todo = todo[nd]
+        f_new = ~forced[todo] & (
+            (f_t[nd] & (Ns[nd] > 0.0)) | (~f_t[nd] & (mt[nd] < -_TOL * s_mu[nd, None]))
+        )
+        empty = kept[todo] & ((f_new * 1.0) @ supf.T == 0.0)
+        if np.any(empty):
+            f_new |= ((empty * 1.0) @ supf > 0.0) & ~forced[todo]
+        free[todo] = f_new
+    # ---------------------------------------------------------------- phase 2
+    if todo.size:
+        denom = (adm[todo] * 1.0) @ G.T  # (m', g)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(kept[todo], blk.b[todo] / denom, 0.0)
+        N[todo] = (share @ supf) * adm[todo]
+        free[todo] = adm[todo]
+    max_iter = _MAX_ITER if _MAX_ITER is not None else 4 * n + 4
+    for it in range(_PDAS_ITER + 1, _PDAS_ITER + max_iter + 1):
+        if todo.size == 0:
+            break
+        f_t = free[todo]
+        Ns, lt, mt, rt = blk.evaluate(todo, f_t)
         s_n = blk.s_n[todo][:, None]
         neg = f_t & (Ns < -_TOL * s_n)
         blocked = neg.any(axis=1)
@@ -475,22 +580,28 @@ def _solve_block(blk: _Block) -> tuple[np.ndarray, ...]:
         lam[di] = lt[ok][done]
         mu[di] = mo[done]
         iters[di] = it
+        ill[di] = rt[ok][done] < _ILL_CONDITIONED
         ri = oi[~done]
         free[ri, k[~done]] = True
         todo = np.concatenate([todo[blocked], ri])
     if todo.size:
         _enumerate(blk, todo, N, lam, mu, free)
         iters[todo] = -1
-    if _POLISH:
-        # final solve of the chosen free sets in extended precision (cancellation-free)
+        ill[todo] = True
+    if blk.maps is None and _POLISH_ALL:
+        ill[:] = True
+    pi = np.flatnonzero(ill)
+    if pi.size:
+        # cancellation-free final solve of the chosen free sets in extended precision
         ld = np.longdouble
-        Nl, ll, ml = _evaluate(
-            blk.X.astype(ld), blk.Y.astype(ld), blk.w.astype(ld), G.astype(ld), free, kept,
-            blk.d.astype(ld), blk.b.astype(ld),
+        X, Y = blk.take(pi)
+        Nl, ll, ml, _ = _evaluate(
+            X.astype(ld), Y.astype(ld), blk.w.astype(ld), G.astype(ld), free[pi], kept[pi],
+            blk.d[pi].astype(ld), blk.b[pi].astype(ld),
         )
-        N = np.where(free, np.maximum(Nl, 0.0), 0.0).astype(float)
-        lam = ll.astype(float)
-        mu = ml.astype(float)
+        N[pi] = np.where(free[pi], np.maximum(Nl, 0.0), 0.0).astype(float)
+        lam[pi] = ll.astype(float)
+        mu[pi] = ml.astype(float)
     return N, lam, mu, free, iters
 
 
@@ -516,7 +627,7 @@ def _enumerate(
             continue
         sel = todo[ok]
         fs = np.broadcast_to(s, (sel.size, n))
-        Nt, lt, mt = blk.evaluate(sel, fs)
+        Nt, lt, mt, _ = blk.evaluate(sel, fs)
         s_mu = blk.mu_scale(sel, np.where(fs, Nt, 0.0), lt)
         viol = _violation(Nt, mt, fs, ~forced[sel], blk.s_n[sel], s_mu)
         viol = np.where(np.isfinite(viol), viol, np.inf)
@@ -571,7 +682,7 @@ class _RegionTable:
         ld = np.longdouble
         eye = np.eye(k, dtype=ld)
         fr = np.repeat(self.free, k, axis=0)
-        Nm, lm, mm = _evaluate(
+        Nm, lm, mm, _ = _evaluate(
             X.astype(ld), Y.astype(ld), w.astype(ld), G.astype(ld), fr,
             np.broadcast_to(kept, (R * k, g)), np.tile(eye[:, :2], (R, 1)),
             np.tile(eye[:, 2:], (R, 1)),
@@ -588,6 +699,9 @@ class _RegionTable:
         flat = np.concatenate([fn, fm], axis=2)  # (R, n, 2k)
         self.flat = np.ascontiguousarray(flat.transpose(2, 1, 0).reshape(2 * k, n * R))
         self.n, self.g, self.R = n, g, R
+        # the largest free set (last row) has held points to check only if some point
+        # belongs to no equality row
+        self.full_needs_mu = bool(np.any(self.checkable & ~self.free[R - 1]))
 
     def solve(
         self, x: np.ndarray, s_n: np.ndarray, s_mu: np.ndarray
@@ -595,12 +709,25 @@ class _RegionTable:
         """Solve samples ``x`` (m, 2 + g); returns N, λ, μ and the free set."""
         m = x.shape[0]
         n, R = self.n, self.R
-        if R == 1:
-            c = np.zeros(m, dtype=np.int64)
-        else:
-            xs = np.concatenate([x / s_n[:, None], x / s_mu[:, None]], axis=1)
-            score = (xs @ self.flat).reshape(m, n, R).min(axis=1)
-            c = np.argmax(score, axis=1)
+        c = np.full(m, R - 1, dtype=np.int64)  # the largest free set comes last
+        if R > 1:
+            # most samples: every admissible point loaded, no multiplier to check
+            if self.full_needs_mu:
+                rest = np.arange(m)
+            else:
+                V_full = np.einsum("nk,tk->tn", self.rows[R - 1], x)
+                rest = np.flatnonzero(np.any(V_full < 0.0, axis=1))
+            if rest.size == 0:
+                return self._finish(x, c)
+            xr = x[rest]
+            xs = np.concatenate([xr / s_n[rest, None], xr / s_mu[rest, None]], axis=1)
+            score = np.einsum("tk,kr->tr", xs, self.flat).reshape(rest.size, n, R).min(axis=1)
+            c[rest] = np.argmax(score, axis=1)
+        return self._finish(x, c)
+
+    def _finish(
+        self, x: np.ndarray, c: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         rows = self.rows[c]  # (m, n, k)
         V = np.einsum("tnk,tk->tn", rows, x)
         free = self.free[c]
@@ -713,6 +840,7 @@ def solve_distribution_batch(
     good_idx = np.flatnonzero(good)
     fixed = pts.ndim == 2 and (1 << n) * n <= _TABLE_MAX_ROWS
     tables: dict[int, _RegionTable] = {}
+    maps = _MapCache(pts[:, 0], pts[:, 1], w, g_mat) if pts.ndim == 2 else None
     chunk = _CHUNK
     if fixed:
         chunk = _CHUNK_TABLE
@@ -722,7 +850,7 @@ def solve_distribution_batch(
             X, Y = pts[:, 0], pts[:, 1]
         else:
             X, Y = pts[idx, :, 0], pts[idx, :, 1]
-        blk = _Block(X, Y, w, g_mat, d_arr[idx], b_c[idx], forced[idx], kept[idx])
+        blk = _Block(X, Y, w, g_mat, d_arr[idx], b_c[idx], forced[idx], kept[idx], maps)
         if fixed:
             N, lt, mt, fr = _solve_fixed(
                 tables, X, Y, w, g_mat, blk.d, blk.b, blk.forced, blk.kept, blk.s_n, blk.s_mu
