@@ -65,6 +65,9 @@ class GaitConfig:
         zmp_passes: Second-stage preview passes that correct the CoM plan so the
             multibody ZMP (swing legs included) follows the reference (0 = cart-table
             plan only).
+        torque_feedforward: Add inverse-dynamics torques of the planned motion to the
+            position servos (removes the stance-leg sag and the tracking lag of an
+            open-loop walk).
     """
 
     step_length: float = 0.12
@@ -79,6 +82,7 @@ class GaitConfig:
     preview_horizon: float = 1.6
     com_iterations: int = 3
     zmp_passes: int = 1
+    torque_feedforward: bool = True
 
     def __post_init__(self) -> None:
         o = "gait"
@@ -101,6 +105,10 @@ class GaitConfig:
         if not isinstance(self.zmp_passes, int) or not 0 <= self.zmp_passes <= 5:
             raise ConfigError(
                 f"gait.zmp_passes = {self.zmp_passes!r} must be an integer in [0, 5]"
+            )
+        if not isinstance(self.torque_feedforward, bool):
+            raise ConfigError(
+                f"gait.torque_feedforward = {self.torque_feedforward!r} must be true or false"
             )
         if abs(self.preview_dt / 0.001 - round(self.preview_dt / 0.001)) > 1e-9:
             raise ConfigError(

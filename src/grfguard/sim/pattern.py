@@ -39,6 +39,7 @@ __all__ = [
     "preview_control",
     "plan_walk",
     "multibody_zmp",
+    "feedforward_torques",
 ]
 
 #: Sample rate of the plan, the simulation and the log in [Hz].
@@ -109,6 +110,8 @@ class WalkPlan:
         footsteps: Footprint (x, y) of each foot after each step [m], (2, n + 1, 2).
         step_times: Start time of each step in [s], (n,).
         com_model_error: Max |model CoM - planned CoM| after the corrections in [m].
+        tau_ff: Feed-forward joint torques [N m], (T, 12), from inverse dynamics of the
+            planned motion (:func:`feedforward_torques`); None when disabled.
     """
 
     gait: GaitConfig
@@ -124,6 +127,7 @@ class WalkPlan:
     footsteps: np.ndarray
     step_times: np.ndarray
     com_model_error: float
+    tau_ff: np.ndarray | None = None
 
 
 def preview_gains(
@@ -353,6 +357,10 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
             f"by {-reach * 1000:.1f} mm; shorten step_length or lower com_height"
         )
     qd = np.gradient(q, _DT, axis=0)
+    tau_ff = None
+    if gait.torque_feedforward:
+        alpha = _right_load_share(zmp, sole, contact)
+        tau_ff = feedforward_torques(robot, t, pelvis, q, alpha, stride=sub)
     return WalkPlan(
         gait=gait,
         time=t,
@@ -367,6 +375,7 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
         footsteps=footsteps,
         step_times=step_times,
         com_model_error=com_err,
+        tau_ff=tau_ff,
     )
 
 
@@ -463,6 +472,96 @@ def multibody_zmp(
         num[:, 0] += fz * c[:, 0] - spec.mass * a[:, 0] * c[:, 2] - L_dot[:, 1]
         num[:, 1] += fz * c[:, 1] - spec.mass * a[:, 1] * c[:, 2] + L_dot[:, 0]
     return num / den[:, None]
+
+
+def _right_load_share(zmp: np.ndarray, sole: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    """Planned share of the vertical load on the right foot, (T,) in [0, 1].
+
+    The ZMP reference projected on the segment from the left to the right sole centre;
+    1 / 0 when only the right / left foot is planned in contact.
+    """
+    d = sole[0, :, :2] - sole[1, :, :2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.einsum("ta,ta->t", zmp - sole[1, :, :2], d) / np.einsum("ta,ta->t", d, d)
+    a = np.clip(np.nan_to_num(a, nan=0.5), 0.0, 1.0)
+    a = np.where(contact[:, 1] == 0, 1.0, a)
+    return np.where(contact[:, 0] == 0, 0.0, a)
+
+
+def feedforward_torques(
+    robot: RobotConfig,
+    t: np.ndarray,
+    p_WB: np.ndarray,
+    q: np.ndarray,
+    right_share: np.ndarray,
+    stride: int = 5,
+) -> np.ndarray:
+    """Joint torques [N m] that realise the planned motion, (T, 12).
+
+    Inverse dynamics of the floating multibody without contacts gives the generalized
+    force ``f_inv = M qdd + c`` (``mj_inverse``, armature included). The six free-joint
+    rows must come from the ground: a sole wrench ``w_s`` (at the ``{s}_sole`` site,
+    world axes) alone would need ``J_s,free^T w_s = f_inv,free``; the load is shared as
+    ``a w_r + (1 - a) w_l`` with ``a = right_share``, and the joint torques are
+    ``tau = f_inv,joints - J_joints^T (a w_r + (1 - a) w_l)``. Computed every ``stride``
+    samples and interpolated with a cubic spline. The pelvis is upright.
+
+    Args:
+        robot: The robot description.
+        t: Sample times [s], (T,), 1 kHz.
+        p_WB: Pelvis position in world [m], (T, 3).
+        q: Joint angles [rad], (T, 12).
+        right_share: Share of the load on the right foot, (T,).
+        stride: Samples between inverse-dynamics evaluations.
+
+    Returns:
+        (T, 12) torques in JOINT_NAMES order.
+    """
+    import mujoco
+
+    from grfguard.model.mjcf import build_mjcf
+
+    model = mujoco.MjModel.from_xml_string(build_mjcf(robot))
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    data = mujoco.MjData(model)
+    dt = float(t[1] - t[0]) if t.size > 1 else _DT
+    qd = np.gradient(q, dt, axis=0)
+    qdd = np.gradient(qd, dt, axis=0)
+    vb = np.gradient(p_WB, dt, axis=0)
+    ab = np.gradient(vb, dt, axis=0)
+    idx = np.unique(np.append(np.arange(0, t.size, stride), t.size - 1))
+    sites = [model.site(f"{s}_sole").id for s in SIDES]
+    n_i = idx.size
+    f_inv = np.empty((n_i, model.nv))
+    jacs = np.zeros((2, n_i, 6, model.nv))
+    qpos = np.empty(model.nq)
+    qvel = np.zeros(model.nv)
+    qacc = np.zeros(model.nv)
+    qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+    for n, k in enumerate(idx):
+        qpos[:3] = p_WB[k]
+        qpos[7:] = q[k]
+        qvel[:3] = vb[k]
+        qvel[6:] = qd[k]
+        qacc[:3] = ab[k]
+        qacc[6:] = qdd[k]
+        data.qpos[:] = qpos
+        data.qvel[:] = qvel
+        data.qacc[:] = qacc
+        mujoco.mj_inverse(model, data)
+        f_inv[n] = data.qfrc_inverse
+        for i, site in enumerate(sites):
+            jac = jacs[i, n]
+            mujoco.mj_jacSite(model, data, jac[:3], jac[3:], site)
+    share = np.stack([right_share[idx], 1.0 - right_share[idx]])  # (2, n_i)
+    ground = np.zeros((n_i, 12))
+    for i in range(2):
+        # the sole wrench that alone balances the free-joint rows, then its joint torques
+        j_free_t = np.swapaxes(jacs[i, :, :, :6], 1, 2)  # (n_i, 6, 6)
+        wrench = np.linalg.solve(j_free_t, f_inv[:, :6, None])[..., 0]
+        ground += share[i][:, None] * np.einsum("nrj,nr->nj", jacs[i, :, :, 6:], wrench)
+    tau = f_inv[:, 6:] - ground
+    return CubicSpline(t[idx], tau)(t)
 
 
 def _reach_all(robot: RobotConfig, pelvis: np.ndarray, sole: np.ndarray) -> np.ndarray:

@@ -1,10 +1,12 @@
 """Open-loop MuJoCo walking simulation that writes a log following the log contract.
 
 The planned joint references (:func:`grfguard.sim.pattern.plan_walk`) drive position
-servos, ``ctrl = q_ref + (kv / kp) qd_ref`` (MuJoCo's position ``kv`` damps toward zero
-velocity, so the feed-forward term gives velocity tracking). The physics runs with
-``mujoco.rollout`` in one-second chunks; every log row is read from ``sensordata`` of
-the same ``mj_forward`` (time ``k`` ms, before the step to ``k + 1`` ms).
+servos, ``ctrl = q_ref + (kv / kp) qd_ref + tau_ff / kp`` (MuJoCo's position ``kv``
+damps toward zero velocity, so the velocity term gives velocity tracking; ``tau_ff``
+are the inverse-dynamics torques of the plan, see ``GaitConfig.torque_feedforward``).
+The physics runs with ``mujoco.rollout`` in one-second chunks; every log row is read
+from ``sensordata`` of the same ``mj_forward`` (time ``k`` ms, before the step to
+``k + 1`` ms).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from mujoco import rollout as mj_rollout
 
 from grfguard.errors import ConfigError, SimulationError
 from grfguard.model.kinematics import quat_to_rotation, rotation_to_quat
-from grfguard.model.mjcf import KV_OVER_KP, build_model
+from grfguard.model.mjcf import KV_OVER_KP, actuator_gains, build_model
 from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, SIDES, SURALP, RobotConfig
 from grfguard.sim.config import GaitConfig, NoiseConfig
 from grfguard.sim.pattern import SAMPLE_RATE, WalkPlan, plan_walk
@@ -34,7 +36,8 @@ __all__ = [
     "PhysicsResult",
 ]
 
-#: Versioned scenario id written to ``df.attrs["scenario"]``.
+#: Versioned scenario id written to ``df.attrs["scenario"]`` (``<robot name>-walk-v1``
+#: for other robots).
 SCENARIO = "suralp-walk-v1"
 #: Trunk tilt from vertical that counts as a fall in [deg].
 FALL_TILT_DEG = 30.0
@@ -113,7 +116,11 @@ def run_physics(
     index = _sensor_index(model)
     # actuator order = joint order of the model; map to JOINT_NAMES
     act_cols = [JOINT_NAMES.index(model.actuator(i).name) for i in range(model.nu)]
-    ctrl = (plan.q_ref + KV_OVER_KP * plan.qd_ref)[:, act_cols]
+    ctrl = plan.q_ref + KV_OVER_KP * plan.qd_ref
+    if plan.tau_ff is not None:
+        kp = np.array([actuator_gains(robot)[j][0] for j in JOINT_NAMES])
+        ctrl = ctrl + plan.tau_ff / kp
+    ctrl = ctrl[:, act_cols]
     # initial state: planned pose at rest
     data.qpos[:3] = plan.pelvis_pos[0]
     data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
@@ -264,7 +271,7 @@ def simulate(
             "seed": int(seed),
             "sample_rate": SAMPLE_RATE,
             "grfguard_version": __version__,
-            "scenario": SCENARIO,
+            "scenario": SCENARIO if robot.name == "suralp" else f"{robot.name}-walk-v1",
             "n_steps": int(plan.gait.n_steps),
             "step_times": [float(v) for v in plan.step_times],
         }
