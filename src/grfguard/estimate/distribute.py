@@ -255,6 +255,32 @@ def _check_zero_mask(zero_mask: Any, T: int, n: int) -> np.ndarray:
     return zm
 
 
+def _rmax(a: np.ndarray) -> np.ndarray:
+    """Row maximum of a (m, k) array with small k (faster than ``max(axis=1)``)."""
+    if a.shape[1] == 0:
+        return np.full(a.shape[0], -np.inf)
+    r = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.maximum(r, a[:, j], out=r)
+    return r
+
+
+def _rany(a: np.ndarray) -> np.ndarray:
+    """Row ``any`` of a (m, k) bool array with small k."""
+    r = np.zeros(a.shape[0], dtype=bool)
+    for j in range(a.shape[1]):
+        r |= a[:, j]
+    return r
+
+
+def _rsum(a: np.ndarray) -> np.ndarray:
+    """Row sum of a (m, k) array with small k."""
+    r = np.zeros(a.shape[0], dtype=np.result_type(a.dtype, np.float64))
+    for j in range(a.shape[1]):
+        r += a[:, j]
+    return r
+
+
 # --------------------------------------------------------------------------- core algebra
 
 
@@ -432,8 +458,8 @@ class _Block:
         self.maps = maps
         p_scale = np.maximum(np.max(np.abs(X), axis=-1), np.max(np.abs(Y), axis=-1))
         p_scale = np.where(p_scale > 0.0, p_scale, 1.0)
-        dn = np.max(np.abs(d), axis=1)
-        self.s_n = np.maximum(np.max(b, axis=1, initial=0.0), dn / p_scale) + 1e-300
+        dn = _rmax(np.abs(d))
+        self.s_n = np.maximum(np.maximum(_rmax(b), 0.0), dn / p_scale) + 1e-300
         self.p_scale = np.broadcast_to(p_scale, dn.shape)
         self.w_max = float(w.max())
         # a-priori multiplier scale (only weights N- against μ-violations on the table path)
@@ -534,16 +560,16 @@ def _solve_block(blk: _Block) -> tuple[np.ndarray, ...]:
         f_new = ~forced[todo] & (
             (f_t[nd] & (Ns[nd] > 0.0)) | (~f_t[nd] & (mt[nd] < -_TOL * s_mu[nd, None]))
         )
-        empty = kept[todo] & ((f_new * 1.0) @ supf.T == 0.0)
+        empty = kept[todo] & ~np.any(f_new[:, None, :] & sup[None], axis=2)
         if np.any(empty):
-            f_new |= ((empty * 1.0) @ supf > 0.0) & ~forced[todo]
+            f_new |= np.any(empty[:, :, None] & sup[None], axis=1) & ~forced[todo]
         free[todo] = f_new
     # ---------------------------------------------------------------- phase 2
     if todo.size:
-        denom = (adm[todo] * 1.0) @ G.T  # (m', g)
+        denom = np.einsum("tn,gn->tg", adm[todo] * 1.0, G)  # (m', g)
         with np.errstate(divide="ignore", invalid="ignore"):
             share = np.where(kept[todo], blk.b[todo] / denom, 0.0)
-        N[todo] = (share @ supf) * adm[todo]
+        N[todo] = np.einsum("tg,gn->tn", share, supf) * adm[todo]
         free[todo] = adm[todo]
     max_iter = _MAX_ITER if _MAX_ITER is not None else 4 * n + 4
     for it in range(_PDAS_ITER + 1, _PDAS_ITER + max_iter + 1):
@@ -716,7 +742,7 @@ class _RegionTable:
                 rest = np.arange(m)
             else:
                 V_full = np.einsum("nk,tk->tn", self.rows[R - 1], x)
-                rest = np.flatnonzero(np.any(V_full < 0.0, axis=1))
+                rest = np.flatnonzero(_rany(V_full < 0.0))
             if rest.size == 0:
                 return self._finish(x, c)
             xr = x[rest]
@@ -816,19 +842,19 @@ def solve_distribution_batch(
         )
     zm = _check_zero_mask(zero_mask, T, n)
 
-    invalid = ~(np.all(np.isfinite(d_arr), axis=1) & np.all(np.isfinite(b_arr), axis=1))
+    invalid = _rany(~np.isfinite(d_arr)) | _rany(~np.isfinite(b_arr))
     if pts.ndim == 3:
         invalid |= ~np.all(np.isfinite(pts), axis=(1, 2))
     elif not np.all(np.isfinite(pts)):
         invalid[:] = True
-    clamped = np.any(b_arr < 0.0, axis=1) & ~invalid
+    clamped = _rany(b_arr < 0.0) & ~invalid
     b_c = np.where(b_arr > 0.0, b_arr, 0.0)
     kept = b_c > 0.0  # (T, g)
     sup = g_mat > 0.0
-    in_dropped = (~kept).astype(float) @ sup.astype(float) > 0.0  # (T, n)
+    in_dropped = np.any(~kept[:, :, None] & sup[None], axis=1)  # (T, n)
     forced = zm | in_dropped
-    has_free = ((~forced).astype(float) @ sup.T.astype(float)) > 0.0  # (T, g)
-    infeasible = np.any(kept & ~has_free, axis=1) & ~invalid
+    has_free = np.any(~forced[:, None, :] & sup[None], axis=2)  # (T, g)
+    infeasible = _rany(kept & ~has_free) & ~invalid
     good = ~invalid & ~infeasible
 
     forces = np.full((T, n), np.nan)
@@ -905,10 +931,10 @@ def _residuals(
     grad = PN - ctd - np.einsum("tg,gn->tn", lam, G)  # stationarity: grad - mu = 0
     stat = np.where(active, 0.0, np.abs(grad))
     dual = np.where(active & ~forced, np.maximum(-grad, 0.0), 0.0)
-    kkt = np.maximum(stat.max(axis=1), dual.max(axis=1))
-    eq_err = np.abs(np.einsum("tn,gn->tg", N, G) - b).max(axis=1)
-    cres = np.maximum(eq_err, np.maximum(-N, 0.0).max(axis=1))
-    obj = np.sum((CN - d) ** 2, axis=1) + np.sum(w * N * N, axis=1)
+    kkt = np.maximum(_rmax(stat), _rmax(dual))
+    eq_err = _rmax(np.abs(np.einsum("tn,gn->tg", N, G) - b))
+    cres = np.maximum(eq_err, np.maximum(_rmax(-N), 0.0))
+    obj = _rsum((CN - d) ** 2) + _rsum(w * N * N)
     return kkt, cres, obj
 
 
@@ -1042,7 +1068,7 @@ def reconstruct_cop(points: Any, forces: Any) -> np.ndarray:
     pts = _check_points(points)
     N = _as_float("forces", forces)
     if pts.ndim == 2:
-        num = N @ pts
+        num = np.einsum("tn,nk->tk", N, pts)
     else:
         num = np.einsum("tn,tnk->tk", N, pts)
     tot = N.sum(axis=1)
@@ -1051,6 +1077,17 @@ def reconstruct_cop(points: Any, forces: Any) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- streaming
+
+
+def _dot_rows(rows: Any, x: tuple[float, ...]) -> list[float]:
+    """``[r · x for r in rows]`` in plain floats (unrolled for 3 and 4 inputs)."""
+    if len(x) == 3:
+        x0, x1, x2 = x
+        return [a * x0 + b * x1 + c * x2 for a, b, c in rows]
+    if len(x) == 4:
+        x0, x1, x2, x3 = x
+        return [a * x0 + b * x1 + c * x2 + e * x3 for a, b, c, e in rows]
+    return [sum(a * v for a, v in zip(r, x, strict=True)) for r in rows]
 
 
 class DistributionSolver:
@@ -1111,7 +1148,8 @@ class DistributionSolver:
                 )
                 for c, bt in enumerate(bits)
             }
-            entry = (rows, [bool(v) for v in tab.checkable])
+            full = None if tab.full_needs_mu or tab.R < 1 else rows[int(bits[-1])][0]
+            entry = (rows, [bool(v) for v in tab.checkable], full)
             self._tables[code] = entry
         return entry
 
@@ -1149,7 +1187,7 @@ class DistributionSolver:
                 for i in grp:
                     held[i] = True
                     code |= 1 << i
-        rows, checkable = self._table(code)
+        rows, checkable, rows_full = self._table(code)
         x = (float(d_x), float(d_y), *bc)
         dn = max(abs(x[0]), abs(x[1]))
         s_n = max(max(bc), dn / self._p_scale) + 1e-300
@@ -1163,6 +1201,13 @@ class DistributionSolver:
                 share = bc[j] / self._gshare[j]
                 for i in grp:
                     N[i] = share
+        full = rows_full
+        if full is not None:
+            # common case: every admissible point loaded at the unconstrained optimum
+            V = _dot_rows(full, x)
+            if min((V[i] for i in range(n) if free[i]), default=0.0) >= -tol_n:
+                self.last_iterations = 1
+                return tuple(V[i] if free[i] and V[i] > 0.0 else 0.0 for i in range(n))
         for it in range(1, 4 * n + 5):
             bits = 0
             for i in range(n):
@@ -1172,7 +1217,7 @@ class DistributionSolver:
             if entry is None:
                 break
             R, L = entry
-            V = [sum(a * v for a, v in zip(r, x, strict=True)) for r in R]
+            V = _dot_rows(R, x)
             alpha = 1.0
             blk = -1
             for i in range(n):
@@ -1192,7 +1237,7 @@ class DistributionSolver:
                 if free[i]:
                     cx -= px[i] * V[i]
                     cy -= py[i] * V[i]
-            lam_max = max(abs(sum(a * v for a, v in zip(r, x, strict=True))) for r in L)
+            lam_max = max(abs(v) for v in _dot_rows(L, x))
             s_mu = self._w_max * s_n + self._p_scale * max(abs(cx), abs(cy)) + lam_max + 1e-300
             worst = -_TOL * s_mu
             k = -1
