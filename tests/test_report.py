@@ -229,6 +229,15 @@ def test_html_table_and_metadata(report_html: str) -> None:
         meta.group(1)
 
 
+def test_html_metadata_from_dicts(run_df: pd.DataFrame) -> None:
+    df = run_df.copy()
+    df.attrs = {"robot": {"name": "bot<1>", "mass": 60.0}, "step_times": list(range(500))}
+    html = build_html_report(df)
+    assert "<title>grfguard report: bot&lt;1&gt;</title>" in html
+    assert "<span class='kv'><b>mass</b> 60</span>" in html
+    assert "(500 items)" in html  # long lists are cut, not dumped
+
+
 def test_html_metrics_win(run_df: pd.DataFrame) -> None:
     html = build_html_report(run_df, metrics={"r2": {"delay_s": 0.4321}}, title="T <x>")
     header, rows = _table_header(html), _table_rows(html)
@@ -355,6 +364,11 @@ def test_figures_content(run_df: pd.DataFrame) -> None:
     step = next(ln for ln in axes[1, 0].get_lines() if ln.get_label() == "flag")
     y = np.asarray(step.get_ydata())
     assert y.min() == 0 and y.max() == 1
+
+    notes = [t.get_text() for ax in axes[:, 0] for t in ax.texts]
+    assert notes == ["delay 0.85 s", "delay 0.25 s", "delay 0.90 s", "delay 0.30 s"]
+    _, axes = F.plot_flags(run_df, metrics={"r2": {"delay_s": 0.5}})
+    assert axes[1, 0].texts[0].get_text() == "delay 0.50 s"
 
     fig, axes = F.plot_flags(run_df, sensors=["l2"], t_range=(1.0, 3.0))
     assert axes.shape == (1, 1) and axes[0, 0].get_xlim() == pytest.approx((1.0, 3.0), abs=1e-3)

@@ -217,8 +217,11 @@ def _figure_legend(fig: Figure, axes: np.ndarray, extras: list[Any]) -> None:
             handles.append(h)
             labels.append(h.get_label())
     if handles:
-        fig.legend(handles, labels, loc="outside lower center", ncols=min(len(handles), 7),
-                   fontsize=9, frameon=False)
+        ncols = len(handles)
+        if sum(len(lab) + 6 for lab in labels) > 120:  # too wide for one row: two rows
+            ncols = math.ceil(len(handles) / 2)
+        fig.legend(handles, labels, loc="outside lower center", ncols=ncols, fontsize=9,
+                   frameon=False)
 
 
 def _sensor_title(sensor: str) -> str:
@@ -317,7 +320,9 @@ def plot_fault_estimate(
     """Fig. 5: true fault, estimated filtered fault and the unfiltered estimate.
 
     The unfiltered estimate is the column ``eta_raw_<s>`` (or ``eta_unfiltered_<s>``)
-    when the run wrote it, else the raw residual ``force_<s> - vfs_<s>`` [N].
+    when the run wrote it, else the raw residual ``force_<s> - vfs_<s>`` [N]. The y range
+    covers the true and filtered fault fully and the unfiltered one from its 2nd to its
+    98th percentile (its spikes are clipped, not allowed to squash the estimates).
 
     Returns:
         ``(fig, axes)``, axes shape (2, 2) in the sole layout.
@@ -325,15 +330,25 @@ def plot_fault_estimate(
 
     def draw(ax: Axes, t: np.ndarray, rows: slice, s: str) -> None:
         raw, label = _unfiltered(df, s)
+        core: list[np.ndarray] = []
+        if _line(ax, t, df, rows, f"eta_{s}", "eta", label="estimated fault (filtered)",
+                 linewidth=1.5, zorder=4):
+            core.append(df[f"eta_{s}"].to_numpy(dtype=float)[rows])
+        if _line(ax, t, df, rows, f"fault_{s}", "fault", zorder=5):
+            core.append(df[f"fault_{s}"].to_numpy(dtype=float)[rows])
         if raw is not None:
             y = raw[rows]
             idx = minmax_indices(y, _DRAW_BUCKETS) if y.size > 3 * _DRAW_BUCKETS else slice(None)
             ax.plot(t[idx], y[idx], color=SIGNAL_COLORS["residual"], linewidth=0.7,
                     label=label, zorder=2)
-        _line(ax, t, df, rows, f"eta_{s}", "eta", label="estimated fault (filtered)",
-              linewidth=1.5, zorder=4)
-        _line(ax, t, df, rows, f"fault_{s}", "fault", zorder=5)
+            fin = y[np.isfinite(y)]
+            if fin.size:  # the raw residual's spikes must not squash the estimates
+                core.append(np.percentile(fin, [2.0, 98.0]))
         ax.axhline(0.0, color="#999999", linewidth=0.6, zorder=1)
+        vals = np.concatenate([c[np.isfinite(c)] for c in core] + [np.zeros(1)])
+        lo, hi = float(vals.min()), float(vals.max())
+        pad = 0.12 * max(hi - lo, 1.0)
+        ax.set_ylim(lo - pad, hi + pad)
 
     return _four_panel(df, foot, t_range, "Fault: true and estimated", "fault [N]", draw)
 
@@ -359,13 +374,18 @@ def plot_flags(
     df: pd.DataFrame,
     sensors: Sequence[str] | None = None,
     t_range: tuple[float, float] | None = None,
+    metrics: Mapping[str, Mapping[str, Any]] | Any | None = None,
 ) -> tuple[Figure, np.ndarray]:
     """Fig. 7: detection flag (0/1) of each sensor over time, with the fault onset.
+
+    Each detected fault is annotated with its detection delay (from ``metrics`` when
+    given, else the fallback of :func:`grfguard.report.summary.sensor_summary`).
 
     Args:
         df: Output of ``grfguard run`` with ``flag_<s>`` columns.
         sensors: Sensors to show, one row each; default the faulty foot's sensors.
         t_range: ``(start, end)`` in [s].
+        metrics: Optional per-sensor metrics (``delay_s``).
 
     Returns:
         ``(fig, axes)``, axes shape (n_sensors, 1).
@@ -378,6 +398,7 @@ def plot_flags(
     if not sensors:
         raise LogFormatError("no flag_<sensor> columns to plot; pass the output of `grfguard run`")
     t, rows = _select(df, t_range)
+    summ = sensor_summary(df, metrics)
     fig, axes = _new_figure(len(sensors), 1, 10.0, 0.95 * len(sensors) + 1.3)
     any_f = any_o = False
     for ax, s in zip(axes[:, 0], sensors, strict=True):
@@ -390,6 +411,13 @@ def plot_flags(
         for a in on[(on >= t[0]) & (on <= t[-1])][:_MAX_MARKS]:
             ax.axvline(a, color="black", linestyle="--", linewidth=1.0, zorder=4)
             any_o = True
+        if s in summ.index and np.isfinite(summ.loc[s, "delay_s"]):
+            d = float(summ.loc[s, "delay_s"])
+            x = float(summ.loc[s, "fault_onset_s"]) + d
+            if t[0] <= x <= t[-1]:
+                ax.annotate(f"delay {d:.2f} s", (x, 1.0), xytext=(4, 2),
+                            textcoords="offset points", fontsize=8, va="bottom",
+                            color=SIGNAL_COLORS["flag"])
         ax.set_ylim(-0.15, 1.25)
         ax.set_yticks([0, 1])
         ax.set_ylabel(s, rotation=0, ha="right", va="center", fontsize=10)
@@ -585,7 +613,7 @@ def write_png_figures(
     if has["recovered_"]:
         jobs.append(("fig6_recovery", lambda: plot_recovery(df, t_range=t_range)))
     if has["flag_"]:
-        jobs.append(("fig7_flags", lambda: plot_flags(df, t_range=t_range)))
+        jobs.append(("fig7_flags", lambda: plot_flags(df, t_range=t_range, metrics=metrics)))
         jobs.append(("detection_timeline", lambda: plot_detection_timeline(df, t_range=t_range)))
     jobs.append(("summary_table", lambda: plot_summary_table(df, metrics)))
     for s in detect_sensors(df):

@@ -375,6 +375,35 @@ def _jsonable(value: Any) -> Any:
     return str(value)
 
 
+def _value_html(v: Any, depth: int = 0) -> str:
+    """Compact HTML of a metadata value: dicts as flowing key/value chips, lists inline."""
+    if isinstance(v, dict):
+        if not v:
+            return "{}"
+        if depth >= 2:
+            return _html.escape(json.dumps(v, sort_keys=True, default=str)[:600])
+        items = "".join(
+            f"<span class='kv'><b>{_html.escape(str(k))}</b> {_value_html(x, depth + 1)}</span>"
+            for k, x in sorted(v.items(), key=lambda kv: str(kv[0]))
+        )
+        return f"<div class='kvs'>{items}</div>"
+    if isinstance(v, list):
+        text = json.dumps(v, default=str)
+        if len(text) > 600:
+            text = text[:600] + f" … ({len(v)} items)"
+        return f"<code>{_html.escape(text)}</code>"
+    if isinstance(v, float):
+        return _html.escape(f"{v:.6g}")
+    return _html.escape(str(v))
+
+
+def _run_name(df: pd.DataFrame) -> str:
+    robot = _jsonable(df.attrs.get("robot", "run"))
+    if isinstance(robot, dict):
+        robot = robot.get("name", "run")
+    return str(robot)
+
+
 def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
     rows: list[tuple[str, str]] = []
     if t.size > 1:
@@ -398,16 +427,7 @@ def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
         (str(k) for k in df.attrs if k not in preferred), key=str
     )
     for k in keys:
-        v = _jsonable(df.attrs[k])
-        if isinstance(v, (dict, list)):
-            text = json.dumps(v, sort_keys=True, default=str)
-            if len(text) > 90:
-                text = json.dumps(v, indent=1, sort_keys=True, default=str)
-            if len(text) > 4000:
-                text = text[:4000] + "\n..."
-            rows.append((k, f"<pre>{_html.escape(text)}</pre>"))
-        else:
-            rows.append((k, _html.escape(str(v))))
+        rows.append((k, _value_html(_jsonable(df.attrs[k]))))
     return (
         "<table class='meta' id='metadata'>"
         + "".join(f"<tr><th>{_html.escape(k)}</th><td>{v}</td></tr>" for k, v in rows)
@@ -427,7 +447,12 @@ table{border-collapse:collapse;font-size:13px;background:#fff}
 th,td{border:1px solid #ddd;padding:4px 8px;text-align:right;vertical-align:top}
 th{background:#f0f2f5}
 table.meta th,table.meta td{text-align:left}
-table.meta pre{margin:0;font-size:12px;max-height:220px;overflow:auto}
+table.meta{width:100%}
+table.meta th{width:150px}
+.kvs{display:flex;flex-wrap:wrap;gap:2px 14px}
+.kv{white-space:nowrap;font-size:12px}
+.kv b{font-weight:600;color:#445}
+table.meta code{font-size:12px;white-space:normal;word-break:break-all}
 td:first-child{text-align:left;font-weight:600}
 .state{padding:1px 6px;border-radius:8px;font-size:12px;white-space:nowrap}
 .state.detected{background:#fde2d6;color:#8a2a00}
@@ -491,7 +516,7 @@ def build_html_report(
 
     summary = sensor_summary(df, metrics)
     specs = sensor_figure_specs(df, max_points=max_points, focus_s=focus_s)
-    title = title or f"grfguard report: {df.attrs.get('robot', 'run')}"
+    title = title or f"grfguard report: {_run_name(df)}"
     payload = json.dumps(specs, separators=(",", ":"), allow_nan=False)
     payload = payload.replace("</", "<\\/")
     n_faulty = int((summary["state"] == "detected").sum() + (summary["state"] == "missed").sum())
