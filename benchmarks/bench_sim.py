@@ -101,8 +101,10 @@ def main() -> None:
     body = (
         f"`{Path(__file__).relative_to(ROOT)}` (best of {args.repeat}, one thread, "
         f"MuJoCo {mujoco.__version__}, numpy {np.__version__}, {cpu}, "
-        f"{os.cpu_count()} logical CPUs). x RT = simulated seconds per wall second; "
-        "pattern = footsteps + ZMP preview control + leg IK + CoM corrections (vectorized); "
+        f"{os.cpu_count()} logical CPUs, load average {os.getloadavg()[0]:.1f} at the end: "
+        "other jobs share the cores, so treat a high load as a lower bound). "
+        "x RT = simulated seconds per wall second; pattern = footsteps + two-stage ZMP "
+        "preview control + leg IK + CoM corrections + inverse-dynamics feed-forward; "
         "physics = `mujoco.rollout` at 1 ms in 1 s chunks with fall checks; "
         "log = noise + truth columns. Goal: >= 10x real time.\n\n" + md
     )
