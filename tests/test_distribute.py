@@ -453,3 +453,22 @@ def test_quadprog_not_imported_at_run_time():
         "assert not bad, bad\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("fixed", [True, False])
+def test_point_outside_every_row_matches_quadprog(fixed):
+    """A point in no row of G is only bounded below (e.g. an extra contact)."""
+    rng = np.random.default_rng(21)
+    n, T = 5, 400
+    G = np.array([[1.0, 1.0, 1.0, 1.0, 0.0]])
+    pts = rng.uniform(-0.15, 0.15, (n, 2) if fixed else (T, n, 2))
+    b = rng.uniform(0.0, 800.0, (T, 1))
+    d = b * rng.uniform(-0.2, 0.2, (T, 2))
+    sol = solve_distribution_batch(pts, d, b, 1e-5, G)
+    ref = np.array([_reference(pts if fixed else pts[t], d[t], b[t], 1e-5, G) for t in range(T)])
+    assert np.abs(sol.forces - ref).max() < 1e-6
+    assert np.any(sol.forces[:, 4] > 1.0) and np.any(sol.forces[:, 4] == 0.0)
+    if fixed:
+        solver = DistributionSolver(pts, 1e-5, G)
+        stream = np.array([solver.solve(d[t, 0], d[t, 1], b[t, 0]) for t in range(T)])
+        assert np.abs(stream - sol.forces).max() < 1e-9

@@ -22,7 +22,9 @@ Corrections to the paper (DESIGN.md item 4): the right-hand side of eq. (21) is
 the matrix of the inequality ``N ≥ 0`` is not an equality matrix; the indices of
 eq. (16) are mixed. The paper's ``W = 0.01 I`` (:data:`PAPER_WEIGHT`) is not small
 next to ``CᵀC`` (entries ≈ 0.01 m² for a 0.24 × 0.15 m sole): it pulls the
-reconstructed CoP toward the sole centre by up to ≈ 15 mm. The default is
+reconstructed CoP toward the sole centre (SURALP: CoP scaled by 0.83 in x and
+0.63 in y while all four corners are loaded, 14 mm at 5 cm forward / 3 cm sideways,
+40 mm at a corner of the sensor rectangle). The default is
 :data:`DEFAULT_WEIGHT` = 1e-6 m².
 
 Solution method (exact). With ``P = CᵀC + W`` (positive definite because ``w > 0``)
@@ -35,14 +37,23 @@ the KKT conditions are
 
 For a guess of the free set ``S`` (the points allowed to carry load) the KKT system
 is linear; its solution is *the* optimum if and only if ``N_S ≥ 0`` and ``μ ≥ 0``
-off ``S`` (strict convexity makes the optimum unique). The batch solver runs the
-primal-dual active-set iteration (free set ← {N > 0} ∪ {μ < 0}) vectorized over all
-samples, accepts a sample once its KKT conditions hold to a relative 1e-9, and
-settles the rare samples that have not converged after a few iterations by
-enumerating every admissible free set and taking the one with the smallest KKT
-violation. When the contact points are the same for every sample (one foot in its
-sole frame) the linear map ``(d, b) → (N, λ, μ)`` of each free set is computed once
-and cached, so a sample costs a small matrix product.
+off ``S`` (strict convexity makes the optimum unique). Stationarity gives
+``N_i = (p_iᵀ ν + (Gᵀλ)_i) / w_i`` on ``S`` with the moment residual ``ν = d - C N``,
+so each guess costs one (2 + g) × (2 + g) positive-definite solve (see
+:func:`_evaluate`), done entry-wise for all samples at once.
+
+* Fixed points, ``2ⁿ·n ≤ 160`` (one foot, n ≤ 5): every admissible free set's
+  linear map ``(d, b) → (N or μ)`` is tabulated once in extended precision; a sample
+  is one small product and an arg-max over the free sets of the worst KKT violation
+  (explicit, "multi-parametric" solution).
+* Otherwise: primal-dual active-set iterations (free set ← {N > 0} ∪ {μ < 0}),
+  vectorized over samples, then the primal active-set method (feasible iterates,
+  finite) for the few samples that have not converged, then enumeration of every
+  admissible free set for any sample still open (degenerate cycling). A sample is
+  accepted when its KKT conditions hold to 1e-12 relative. Fixed points use cached
+  exact maps per free set; per-sample points redo the final solve in extended
+  precision (``np.longdouble``), because with a tiny ``w`` and an unreachable CoP
+  the double-precision solve loses up to ~1e-9 relative to cancellation.
 
 Degenerate input, handled on purpose:
 
@@ -59,9 +70,9 @@ Degenerate input, handled on purpose:
 * Infeasible samples (a loaded group whose points are all masked out): forces
   ``NaN`` and :attr:`DistributionSolution.infeasible` set.
 
-Streaming: :class:`DistributionSolver` (fixed points, plain Python floats, a few
-µs per solve) and :func:`solve_distribution_one` (any points, one sample) return
-the same numbers as :func:`solve_distribution_batch` to rounding.
+Streaming: :class:`DistributionSolver` (fixed points, plain Python floats, ~10 µs
+per solve) and :func:`solve_distribution_one` (any points, one sample, the batch
+path with T = 1) return the numbers of :func:`solve_distribution_batch` to 1e-9 N.
 """
 
 from __future__ import annotations
@@ -644,7 +655,7 @@ def _enumerate(
     n = forced.shape[1]
     sup = blk.G > 0.0
     best = np.full(todo.size, np.inf)
-    all_sets = ((np.arange(1, 1 << n)[:, None] >> np.arange(n)) & 1).astype(bool)
+    all_sets = ((np.arange(1 << n)[:, None] >> np.arange(n)) & 1).astype(bool)
     for s in all_sets:
         ok = ~np.any(s & forced[todo], axis=1)
         has = (s[None, None, :] & sup[None]).any(axis=2)  # (1, g)
@@ -1121,7 +1132,6 @@ class DistributionSolver:
         self.G = _check_equality(G, self.n)
         self.g = self.G.shape[0]
         self._groups = [tuple(np.flatnonzero(row > 0.0).tolist()) for row in self.G]
-        self._grouped = [bool(v) for v in (self.G > 0.0).any(axis=0)]
         self._gshare = [float(self.G[j, list(grp)].sum()) for j, grp in enumerate(self._groups)]
         p_scale = float(np.max(np.abs(pts)))
         self._p_scale = p_scale if p_scale > 0.0 else 1.0
@@ -1194,7 +1204,7 @@ class DistributionSolver:
         tol_n = _TOL * s_n
         px, py = self._px, self._py
         # feasible start: each loaded group's load spread over its points
-        free = [(not held[i]) and self._grouped[i] for i in range(n)]
+        free = [not held[i] for i in range(n)]
         N = [0.0] * n
         for j, grp in enumerate(self._groups):
             if bc[j] > 0.0:
