@@ -587,6 +587,10 @@ class Monitor:
                 if self._guard[f]:
                     swing_ok[f] = False
                     continue
+                exp_sw = self._swing_dur[f] if math.isfinite(self._swing_dur[f]) else \
+                    self._swing_dur[1 - f]
+                if t - self._t_lo[f] < 0.5 * exp_sw:
+                    continue  # an early touchdown only happens late in the swing
                 hi = 0
                 for i in range(4 * f, 4 * f + 4):
                     xi = x[i]
@@ -805,8 +809,11 @@ class Monitor:
                 s.valid_since_alarm += 1
             if s.valid_since_alarm >= int(round(hold / c.dt_s)) * 0.5 and t - last >= hold:
                 s.clear()
-        elif s.valid_since_alarm >= need // 2 and t - last >= c.clear_s:
-            s.clear()
+        else:
+            # sparse faults (spikes) need a longer quiet stretch of valid test time
+            k = 3.0 if s.kind == "spikes" else 0.5
+            if s.valid_since_alarm >= need * k and t - last >= c.clear_s:
+                s.clear()
         if not s.flag:
             s.gp = s.gn = s.cp = s.cn = 0.0
 
@@ -878,7 +885,7 @@ class Monitor:
         c = self.config
         dt = c.dt_s
         a_track = min(1.0, dt / 0.02)
-        a_decay = min(1.0, dt / 0.3)
+        a_decay = min(1.0, dt / 0.03)
         sens = self._sensors
         corrected = [_NAN] * _N
         info = [True] * _N
@@ -906,7 +913,8 @@ class Monitor:
             f = i // 4
             idx = range(4 * f, 4 * f + 4)
             vi = v[i] if math.isfinite(v[i]) else 0.0
-            if ss_ok[f] and math.isfinite(tot[f]) and not info[i]:
+            if not info[i] and contact[f] and math.isfinite(tot[f]):
+                # foot balance: the VFS foot total minus the known corners
                 lacking = [j for j in idx if not info[j]]
                 known = math.fsum(corrected[j] for j in idx if info[j] and
                                   math.isfinite(corrected[j]))
@@ -916,11 +924,16 @@ class Monitor:
                     share = (max(v[i], 0.0) if math.isfinite(v[i]) else 0.0) / sum(vs) \
                         if sum(vs) > 0 else 1.0 / len(lacking)
                     rest *= share
-                target = max(rest, 0.0) - vi
-                s.delta += (target - s.delta) * a_track
+                balance = max(rest, 0.0)
             else:
-                s.delta -= s.delta * a_decay
-            repl = max(vi + s.delta, 0.0) if contact[f] else max(vi, 0.0)
+                balance = vi
+            # weight of the balance: 1 in clean single support, 0 elsewhere (smoothed)
+            s.delta += ((1.0 if ss_ok[f] else 0.0) - s.delta) * (a_track if ss_ok[f]
+                                                                   else a_decay)
+            if contact[f]:
+                repl = max(s.delta * balance + (1.0 - s.delta) * vi, 0.0)
+            else:
+                repl = max(vi, 0.0)
             w = s.hand.update(1.0 if s.flag else 0.0)
             rec_fault = corrected[i] if info[i] and math.isfinite(corrected[i]) else repl
             rec = HandOver.mix(w, x[i], rec_fault, s.last_rec)
