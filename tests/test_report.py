@@ -27,11 +27,16 @@ from grfguard.report.summary import normalize_metrics
 # ------------------------------------------------------------------------------ helpers
 
 
-def _payload(html: str) -> list[dict]:
+def _all_specs(html: str) -> list[dict]:
     m = re.search(r"<script type='application/json' id='grfguard-data'>(.*?)</script>", html,
                   re.S)
     assert m, "figure data block missing"
     return json.loads(m.group(1))
+
+
+def _payload(html: str) -> list[dict]:
+    """The per-sensor figure specs (overview figures left out)."""
+    return [sp for sp in _all_specs(html) if sp["sensor"]]
 
 
 def _decode(arr: dict | list) -> np.ndarray:
@@ -205,6 +210,22 @@ def test_html_shading_and_alarm_marks(report_html: str) -> None:
     assert specs["l1"]["layout"]["shapes"] == []
     contact = next(tr for tr in specs["l1"]["data"] if tr["meta"]["signal"] == "contact")
     assert contact["fill"] == "tozeroy" and contact["line"]["shape"] == "hv"
+
+
+def test_html_overview(report_html: str, run_df: pd.DataFrame) -> None:
+    specs = {sp["id"]: sp for sp in _all_specs(report_html) if not sp["sensor"]}
+    assert list(specs) == ["fig-timeline", "fig-feet"]
+    tl = {tr["meta"]["signal"]: tr for tr in specs["fig-timeline"]["data"]}
+    # 4 injected windows and 5 flag episodes (4 faults + the l2 false alarm), 6 points each.
+    assert len(tl["fault_windows"]["x"]) == 4 * 6 and len(tl["flag_episodes"]["x"]) == 5 * 6
+    assert min(x for x in tl["flag_episodes"]["x"] if x is not None) == pytest.approx(2.0)
+    assert specs["fig-timeline"]["layout"]["yaxis"]["ticktext"] == list(reversed(SENSOR_NAMES))
+    feet = specs["fig-feet"]["data"]
+    assert [tr["meta"]["signal"] for tr in feet] == ["foot_measured", "foot_vfs", "foot_true"] * 2
+    true_r = _decode(feet[2]["y"])
+    total = run_df[[f"true_force_r{k}" for k in range(1, 5)]].to_numpy().sum(axis=1)
+    assert true_r.max() == pytest.approx(total.max(), rel=1e-6)
+    assert "<h2>Overview</h2>" in report_html
 
 
 def test_html_table_and_metadata(report_html: str) -> None:
@@ -416,3 +437,20 @@ def test_report_on_real_run(clean_walk: pd.DataFrame, tmp_path: Path) -> None:
     assert {"true", "VFS"} <= {ln.get_label() for ln in axes[0, 1].get_lines()}
     fig, axes = plot_flags(out)
     assert axes.shape == (4, 1)
+
+
+def test_html_alarm_storm_is_capped(tmp_path: Path) -> None:
+    df = synthetic_run(duration_s=120.0, seed=4)
+    t = df["time"].to_numpy()
+    df["flag_l3"] = (np.floor(t / 0.05) % 2).astype(bool)  # 1200 alarm episodes
+    path = write_html_report(df, tmp_path / "storm.html")
+    html = path.read_text(encoding="utf-8")
+    sp = next(sp for sp in _payload(html) if sp["sensor"] == "l3")
+    lines = [sh for sh in sp["layout"]["shapes"] if sh["type"] == "line"]
+    assert len(lines) == 200
+    assert "capped: 200/1200 alarm onsets" in sp["layout"]["title"]["text"]
+    flag = next(tr for tr in sp["data"] if tr["meta"]["signal"] == "flag")
+    n_changes = np.count_nonzero(np.diff(df["flag_l3"].to_numpy().astype(int)))
+    assert _decode(flag["y"]).size == n_changes + 2  # exact change points, never decimated
+    rows, header = _table_rows(html), _table_header(html)
+    assert rows["l3"][header.index("false alarms")] == "1200"

@@ -53,7 +53,12 @@ def test_page_ready_without_errors_or_network(loaded) -> None:
 
 
 def test_every_figure_rendered_with_expected_traces(loaded) -> None:
-    figs = loaded.state["figures"]
+    overview = [f for f in loaded.state["figures"] if not f["sensor"]]
+    assert [f["id"] for f in overview] == ["fig-timeline", "fig-feet"]
+    for f in overview:
+        assert f["data_traces"] == f["svg_traces"] == f["expected"] > 0, f
+        assert f["drawn_paths"] >= f["expected"], f
+    figs = [f for f in loaded.state["figures"] if f["sensor"]]
     assert [f["sensor"] for f in figs] == ["r1", "r2", "r3", "r4", "l1", "l2", "l3", "l4"]
     for f in figs:
         assert f["expected"] == 8
@@ -76,7 +81,7 @@ def test_screenshot_not_blank(loaded) -> None:
     assert loaded.screenshot is not None and loaded.screenshot.is_file()
     img = imread(loaded.screenshot)[..., :3]
     assert img.shape[1] >= 1000 and img.shape[0] >= loaded.state["pageHeight"] - 2
-    first = loaded.state["figures"][1]  # r2: fault, alarm and all signals
+    first = next(f for f in loaded.state["figures"] if f["sensor"] == "r2")  # all signals
     top = int(first["top"])
     crop = img[top : top + int(first["height"]), 60:1300]
     colours = (crop[::2, ::2] * 255).astype(np.int64).reshape(-1, 3)

@@ -6,6 +6,7 @@ figure data is one JSON block of base64 float32 typed arrays, and the page shows
 * the run's metadata (robot, gait, method, thresholds, ... from ``df.attrs``),
 * a per-sensor summary table (state, kind, size, delay, recovery error), see
   :func:`grfguard.report.summary.sensor_summary`,
+* an overview: detection timeline of all sensors and the vertical force per foot,
 * one interactive figure per sensor: forces (measured, VFS, recovered, truth) on
   top, fault (estimated, true) and the detection flag below; planned stance of the
   sensor's foot and injected fault windows shaded, alarm onsets as red dashed lines.
@@ -51,7 +52,12 @@ from grfguard.report.summary import (
     sensor_summary,
 )
 
-__all__ = ["write_html_report", "build_html_report", "sensor_figure_specs"]
+__all__ = [
+    "write_html_report",
+    "build_html_report",
+    "sensor_figure_specs",
+    "overview_figure_specs",
+]
 
 _SIDE_NAMES = {"r": "right", "l": "left"}
 _CORNER_NAMES = {1: "front-left", 2: "front-right", 3: "rear-left", 4: "rear-right"}
@@ -298,6 +304,127 @@ def sensor_figure_specs(
     return specs
 
 
+def _polygons(spans: list[tuple[float, float]], y: float, half: float) -> tuple[list, list]:
+    """Rectangles ``[a, b] x [y - half, y + half]`` as one ``fill='toself'`` path."""
+    xs: list[float | None] = []
+    ys: list[float | None] = []
+    for a, b in spans:
+        xs += [a, a, b, b, a, None]
+        ys += [y - half, y + half, y + half, y - half, y - half, None]
+    return xs, ys
+
+
+def overview_figure_specs(df: pd.DataFrame, max_points: int = 2000) -> list[dict[str, Any]]:
+    """Overview figures: a detection timeline of all sensors and the per-foot totals.
+
+    The timeline shows, per sensor, the injected fault windows (shaded) and the flag-on
+    episodes (bars). The totals figure shows, per foot, the VFS total
+    (``vfs_total_<side>``), the sum of the measured sensors and of the true forces [N],
+    whichever are present.
+
+    Returns:
+        Specs like :func:`sensor_figure_specs` (``sensor`` is ``""``).
+    """
+    t = _time(df)
+    sensors = detect_sensors(df)
+    specs: list[dict[str, Any]] = []
+    fx: list[Any] = []
+    fy: list[Any] = []
+    ax_: list[Any] = []
+    ay: list[Any] = []
+    n = len(sensors)
+    for i, s in enumerate(sensors):
+        y = n - 1 - i
+        fm = fault_mask(df, s)
+        if fm is not None and fm.any():
+            xs, ys = _polygons(_intervals_from_mask(t, fm), y, 0.42)
+            fx += xs
+            fy += ys
+        if f"flag_{s}" in df.columns:
+            fl = df[f"flag_{s}"].fillna(False).to_numpy().astype(bool)
+            xs, ys = _polygons(_intervals_from_mask(t, fl), y, 0.2)
+            ax_ += xs
+            ay += ys
+    data: list[dict[str, Any]] = []
+    if fx:
+        data.append({"type": "scatter", "mode": "lines", "x": fx, "y": fy, "fill": "toself",
+                     "fillcolor": FAULT_SHADE, "line": {"width": 0}, "name": "injected fault",
+                     "hoverinfo": "skip", "meta": {"signal": "fault_windows"}})
+    if ax_:
+        data.append({"type": "scatter", "mode": "lines", "x": ax_, "y": ay, "fill": "toself",
+                     "fillcolor": SIGNAL_COLORS["flag"], "line": {"width": 0,
+                                                                   "color": SIGNAL_COLORS["flag"]},
+                     "name": "flag on", "hoverinfo": "x+name",
+                     "meta": {"signal": "flag_episodes"}})
+    if data:
+        specs.append({
+            "id": "fig-timeline", "sensor": "", "data": data, "n_traces": len(data),
+            "layout": {
+                "title": {"text": "Detection timeline", "x": 0.01, "font": {"size": 15}},
+                "height": 110 + 30 * n, "template": "none",
+                "margin": {"l": 70, "r": 60, "t": 40, "b": 45},
+                "font": {"family": "system-ui, -apple-system, Segoe UI, Roboto, sans-serif"},
+                "xaxis": {"title": {"text": "time [s]"}, "range": [float(t[0]), float(t[-1])],
+                          "showgrid": True, "gridcolor": "#e5e5e5", "zeroline": False},
+                "yaxis": {"tickvals": list(range(n)), "ticktext": list(reversed(sensors)),
+                          "range": [-0.6, n - 0.4], "fixedrange": True, "showgrid": False,
+                          "zeroline": False},
+                "legend": {"orientation": "h", "x": 0.3, "xanchor": "left", "y": 1.0,
+                           "yanchor": "bottom"},
+                "hovermode": "closest",
+            },
+        })
+    # Per-foot totals.
+    data = []
+    sides = [side for side in ("r", "l") if any(s[:1] == side for s in sensors)]
+    for k, side in enumerate(sides):
+        yaxis = "y" if k == 0 else f"y{k + 1}"
+        own = [s for s in sensors if s[:1] == side]
+        series: list[tuple[str, str, np.ndarray]] = []
+        if all(f"force_{s}" in df.columns for s in own):
+            series.append(("measured", "measured sum",
+                           df[[f"force_{s}" for s in own]].to_numpy(dtype=float).sum(axis=1)))
+        if f"vfs_total_{side}" in df.columns:
+            series.append(("vfs", "VFS total", df[f"vfs_total_{side}"].to_numpy(dtype=float)))
+        if all(f"true_force_{s}" in df.columns for s in own):
+            series.append(("true", "true sum", df[[f"true_force_{s}" for s in own]]
+                           .to_numpy(dtype=float).sum(axis=1)))
+        for kind, label, y in series:
+            idx = minmax_indices(y, max_points)
+            data.append({
+                "type": "scatter", "mode": "lines", "name": label, "legendgroup": kind,
+                "showlegend": k == 0, "x": _typed(t[idx]), "y": _typed(y[idx]),
+                "xaxis": "x", "yaxis": yaxis,
+                "line": {"color": SIGNAL_COLORS[kind], "width": 1.3,
+                         "dash": "dot" if kind == "true" else "solid"},
+                "hovertemplate": f"{_SIDE_NAMES[side]} {label}: %{{y:.0f}} N<extra></extra>",
+                "meta": {"signal": f"foot_{kind}", "side": side},
+            })
+    if data:
+        gap = 0.12
+        h = (1.0 - gap * (len(sides) - 1)) / len(sides)
+        layout: dict[str, Any] = {
+            "title": {"text": "Vertical force per foot", "x": 0.01, "font": {"size": 15}},
+            "height": 170 + 190 * len(sides), "template": "none",
+            "margin": {"l": 70, "r": 60, "t": 40, "b": 70},
+            "font": {"family": "system-ui, -apple-system, Segoe UI, Roboto, sans-serif"},
+            "hovermode": "x",
+            "legend": {"orientation": "h", "x": 0.3, "xanchor": "left", "y": 1.0,
+                       "yanchor": "bottom"},
+            "xaxis": {"title": {"text": "time [s]"}, "anchor": f"y{len(sides)}"
+                      if len(sides) > 1 else "y", "showgrid": True, "gridcolor": "#e5e5e5"},
+        }
+        for k, side in enumerate(sides):
+            top = 1.0 - k * (h + gap)
+            layout["yaxis" if k == 0 else f"yaxis{k + 1}"] = {
+                "title": {"text": f"{_SIDE_NAMES[side]} foot [N]"},
+                "domain": [max(top - h, 0.0), top], "showgrid": True, "gridcolor": "#e5e5e5",
+            }
+        specs.append({"id": "fig-feet", "sensor": "", "data": data, "layout": layout,
+                      "n_traces": len(data)})
+    return specs
+
+
 def _fmt(value: Any, digits: int = 2) -> str:
     if value is None:
         return "–"
@@ -515,7 +642,8 @@ def build_html_report(
     from plotly.offline import get_plotlyjs
 
     summary = sensor_summary(df, metrics)
-    specs = sensor_figure_specs(df, max_points=max_points, focus_s=focus_s)
+    overview = overview_figure_specs(df, max_points=max_points)
+    specs = overview + sensor_figure_specs(df, max_points=max_points, focus_s=focus_s)
     title = title or f"grfguard report: {_run_name(df)}"
     payload = json.dumps(specs, separators=(",", ":"), allow_nan=False)
     payload = payload.replace("</", "<\\/")
@@ -525,11 +653,14 @@ def build_html_report(
         f"{t.size} samples, {t[-1] - t[0]:.1f} s; {len(summary)} sensors, "
         f"{n_faulty} with injected faults, {n_flagged} raised alarms"
     )
-    figs = "".join(
-        f"<div class='fig' id='{sp['id']}' data-sensor='{sp['sensor']}' "
-        f"data-traces='{sp['n_traces']}' style='height:{sp['layout']['height']}px'></div>"
-        for sp in specs
-    )
+    def div(sp: dict[str, Any]) -> str:
+        return (
+            f"<div class='fig' id='{sp['id']}' data-sensor='{sp['sensor']}' "
+            f"data-traces='{sp['n_traces']}' style='height:{sp['layout']['height']}px'></div>"
+        )
+
+    overview_divs = "".join(div(sp) for sp in overview)
+    figs = "".join(div(sp) for sp in specs[len(overview):])
     return (
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
         "<meta name='viewport' content='width=device-width, initial-scale=1'>"
@@ -546,7 +677,8 @@ def build_html_report(
         "episodes starting outside injected fault windows. Size: mean over the last second of "
         "the fault window. Recovery / raw RMSE: recovered / measured minus true force over the "
         "flagged samples of the fault window. – : undefined or not in the log.</p>"
-        "<h2>Run</h2>" + _metadata_html(df, t)
+        + ("<h2>Overview</h2>" + overview_divs if overview_divs else "")
+        + "<h2>Run</h2>" + _metadata_html(df, t)
         + "<h2>Signals</h2><p class='note'>Blue strip at the top: planned stance of the "
         "sensor's foot; shaded red: injected fault; red dashed lines: alarm onsets. Traces are "
         f"decimated for display ({max_points} min/max buckets, peaks kept; full resolution within "
