@@ -740,28 +740,6 @@ class _RegionTable:
         # belongs to no equality row
         self.full_needs_mu = bool(np.any(self.checkable & ~self.free[R - 1]))
 
-    def solve(
-        self, x: np.ndarray, s_n: np.ndarray, s_mu: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Solve samples ``x`` (m, 2 + g); returns N, λ, μ and the free set."""
-        m = x.shape[0]
-        n, R = self.n, self.R
-        c = np.full(m, R - 1, dtype=np.int64)  # the largest free set comes last
-        if R > 1:
-            # most samples: every admissible point loaded, no multiplier to check
-            if self.full_needs_mu:
-                rest = np.arange(m)
-            else:
-                V_full = np.einsum("nk,tk->tn", self.rows[R - 1], x)
-                rest = np.flatnonzero(_rany(V_full < 0.0))
-            if rest.size == 0:
-                return self._finish(x, c)
-            xr = x[rest]
-            xs = np.concatenate([xr / s_n[rest, None], xr / s_mu[rest, None]], axis=1)
-            score = np.einsum("tk,kr->tr", xs, self.flat).reshape(rest.size, n, R).min(axis=1)
-            c[rest] = np.argmax(score, axis=1)
-        return self._finish(x, c)
-
     def _finish(
         self, x: np.ndarray, c: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -774,32 +752,72 @@ class _RegionTable:
         return N, lam, mu, free
 
 
-def _solve_fixed(
+def _solve_tables(
     tables: dict[int, _RegionTable],
-    X: np.ndarray, Y: np.ndarray, w: np.ndarray, G: np.ndarray,
-    d: np.ndarray, b: np.ndarray, held: np.ndarray, kept: np.ndarray,
-    s_n: np.ndarray, s_mu: np.ndarray,
-) -> tuple[np.ndarray, ...]:
-    """Fixed points: group samples by (held, kept) pattern, solve each with its table."""
-    m, n = held.shape
-    g = G.shape[0]
+    pts: np.ndarray, w: np.ndarray, G: np.ndarray,
+    d: np.ndarray, b: np.ndarray, held: np.ndarray, kept: np.ndarray, good: np.ndarray,
+    forces: np.ndarray, lam: np.ndarray, mu: np.ndarray, active: np.ndarray,
+) -> None:
+    """Fixed points, table path, whole log at once; writes into the output arrays.
+
+    Samples are grouped by (held, kept) pattern; in each group the largest free set is
+    tried for every sample with one product, and only the samples it does not solve
+    go through the arg-max over all free sets (in cache-sized blocks).
+    """
+    n, g = G.shape[1], G.shape[0]
+    X, Y = pts[:, 0], pts[:, 1]
+    p_scale = float(max(np.max(np.abs(X)), np.max(np.abs(Y)))) or 1.0
+    w_max = float(w.max())
     codes = _encode(held, kept)
-    uniq, inv = np.unique(codes, return_inverse=True)
-    inv = inv.reshape(-1)
-    x = np.concatenate([d, b], axis=1)
-    N = np.zeros((m, n))
-    lam = np.zeros((m, g))
-    mu = np.zeros((m, n))
-    free = np.zeros((m, n), dtype=bool)
-    for k, code in enumerate(uniq.tolist()):
+    codes[~good] = -1
+    present = np.flatnonzero(np.bincount(codes + 1, minlength=1)[1:]).tolist()
+    x_all = np.concatenate([d, b], axis=1)
+    everything = len(present) == 1 and bool(np.all(good))
+    for code in present:
         tab = tables.get(code)
         if tab is None:
             h, kp = _decode(np.array([code], dtype=np.int64), n, g)
             tab = _RegionTable(X, Y, w, G, h[0], kp[0])
             tables[code] = tab
-        sel = np.flatnonzero(inv == k) if uniq.shape[0] > 1 else np.arange(m)
-        N[sel], lam[sel], mu[sel], free[sel] = tab.solve(x[sel], s_n[sel], s_mu[sel])
-    return N, lam, mu, free
+        sel = np.arange(codes.size) if everything else np.flatnonzero(codes == code)
+        x = x_all if everything else x_all[sel]
+        R = tab.R
+        if tab.full_needs_mu or R == 1:
+            rest = np.arange(sel.size) if R > 1 else np.zeros(0, dtype=np.int64)
+            if R == 1:
+                c = np.zeros(sel.size, dtype=np.int64)
+                N_, lam_, mu_, free_ = tab._finish(x, c)
+                forces[sel], lam[sel], mu[sel], active[sel] = N_, lam_, mu_, ~free_
+        else:
+            f_full = tab.free[R - 1]
+            V = np.einsum("nk,tk->tn", tab.rows[R - 1], x)
+            neg = _rany((V < 0.0) & f_full)
+            ok = np.flatnonzero(~neg)
+            rest = np.flatnonzero(neg)
+            lam_full = np.einsum("gk,tk->tg", tab.lam[R - 1], x[ok])
+            if rest.size == 0:
+                forces[sel] = np.where(f_full, V, 0.0)
+                lam[sel] = lam_full
+                mu[sel] = 0.0
+                active[sel] = ~f_full
+            else:
+                so = sel[ok]
+                forces[so] = np.where(f_full, V[ok], 0.0)
+                lam[so] = lam_full
+                mu[so] = 0.0
+                active[so] = ~f_full
+        for start in range(0, rest.size, _CHUNK_TABLE):
+            r = rest[start : start + _CHUNK_TABLE]
+            xr = x[r]
+            dn = np.maximum(np.abs(xr[:, 0]), np.abs(xr[:, 1]))
+            s_n = np.maximum(np.maximum(_rmax(xr[:, 2:]), 0.0), dn / p_scale) + 1e-300
+            s_mu = w_max * s_n + p_scale * dn + 1e-300
+            xs = np.concatenate([xr / s_n[:, None], xr / s_mu[:, None]], axis=1)
+            score = np.einsum("tk,kr->tr", xs, tab.flat).reshape(r.size, n, R).min(axis=1)
+            c = np.argmax(score, axis=1)
+            N_, lam_, mu_, free_ = tab._finish(xr, c)
+            sr = sel[r]
+            forces[sr], lam[sr], mu[sr], active[sr] = N_, lam_, mu_, ~free_
 
 
 # --------------------------------------------------------------------------- batch API
@@ -874,32 +892,28 @@ def solve_distribution_batch(
     active = np.ones((T, n), dtype=bool)
     iters = np.zeros(T, dtype=np.int64)
 
-    good_idx = np.flatnonzero(good)
-    fixed = pts.ndim == 2 and (1 << n) * n <= _TABLE_MAX_ROWS
-    tables: dict[int, _RegionTable] = {}
-    maps = _MapCache(pts[:, 0], pts[:, 1], w, g_mat) if pts.ndim == 2 else None
-    chunk = _CHUNK
-    if fixed:
-        chunk = _CHUNK_TABLE
-    for start in range(0, good_idx.size, chunk):
-        idx = good_idx[start : start + chunk]
-        if pts.ndim == 2:
-            X, Y = pts[:, 0], pts[:, 1]
-        else:
-            X, Y = pts[idx, :, 0], pts[idx, :, 1]
-        blk = _Block(X, Y, w, g_mat, d_arr[idx], b_c[idx], forced[idx], kept[idx], maps)
-        if fixed:
-            N, lt, mt, fr = _solve_fixed(
-                tables, X, Y, w, g_mat, blk.d, blk.b, blk.forced, blk.kept, blk.s_n, blk.s_mu
-            )
-            it = np.ones(idx.size, dtype=np.int64)
-        else:
+    if pts.ndim == 2 and (1 << n) * n <= _TABLE_MAX_ROWS:
+        tables: dict[int, _RegionTable] = {}
+        _solve_tables(
+            tables, pts, w, g_mat, d_arr, b_c, forced, kept, good, forces, lam, mu, active
+        )
+        iters[good] = 1
+    else:
+        maps = _MapCache(pts[:, 0], pts[:, 1], w, g_mat) if pts.ndim == 2 else None
+        good_idx = np.flatnonzero(good)
+        for start in range(0, good_idx.size, _CHUNK):
+            idx = good_idx[start : start + _CHUNK]
+            if pts.ndim == 2:
+                X, Y = pts[:, 0], pts[:, 1]
+            else:
+                X, Y = pts[idx, :, 0], pts[idx, :, 1]
+            blk = _Block(X, Y, w, g_mat, d_arr[idx], b_c[idx], forced[idx], kept[idx], maps)
             N, lt, mt, fr, it = _solve_block(blk)
-        forces[idx] = N
-        lam[idx] = lt
-        mu[idx] = np.where(forced[idx], 0.0, mt)
-        active[idx] = ~fr
-        iters[idx] = it
+            forces[idx] = N
+            lam[idx] = lt
+            mu[idx] = np.where(forced[idx], 0.0, mt)
+            active[idx] = ~fr
+            iters[idx] = it
 
     kkt, cres, obj = _residuals(pts, w, g_mat, d_arr, b_c, forces, lam, mu, active, forced)
     return DistributionSolution(
