@@ -314,3 +314,68 @@ class PaperCoMFilter:
             self.dc = self.dc + self.k_dob * (p_err - self.dc)
         c_hat = self.x[0] + self.dob_gain * self.dc
         return c_hat, self.x[2].copy()
+
+
+class ZMPKalmanFilter:
+    """Kalman filter on the pendulum dynamics with the ZMP as a state (both horizontal axes).
+
+    Per axis the state is ``(c, c_d, p)``: CoM, CoM velocity and ZMP [m, m/s, m]. The
+    multibody Newton-Euler relation ``p = c - (h F_xy -/+ L_dot) / F_z`` with
+    ``F_xy = m c_dd`` gives the (time-varying) pendulum model::
+
+        c_dd = w2 (c - p) + u,     w2 = F_z / (m h),   u = (-L_dot_y, +L_dot_x) / (m h)
+        p_d  = white noise (zmp_rate_psd)
+
+    and the measurement is the kinematic CoM ``c`` (noise ``com_sigma``). Compared with
+    differentiating ``c`` twice through a low-pass, the pendulum structure rejects
+    attitude/encoder jitter (which cannot be explained by a ZMP inside the feet) without
+    the low-pass lag. Euler discretization at ``dt``; both axes share the covariance.
+
+    Args:
+        dt_s: Sampling period [s].
+        zmp_rate_psd: Spectral density of the ZMP velocity random walk [m^2/s].
+        acc_psd: Spectral density of the CoM acceleration model error [m^2/s^3].
+        com_sigma: Kinematic CoM measurement noise [m].
+    """
+
+    def __init__(
+        self, dt_s: float, zmp_rate_psd: float, acc_psd: float, com_sigma: float
+    ) -> None:
+        self.dt = dt_s
+        self.Q = np.diag([1e-12, acc_psd * dt_s, zmp_rate_psd * dt_s])
+        self.R = com_sigma**2
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the state."""
+        self.x: np.ndarray | None = None  # (3, 2)
+        self.P = np.diag([1e-6, 1e-2, 1e-4])
+
+    def update(
+        self, com_xy: np.ndarray, w2: float, u_xy: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One sample.
+
+        Args:
+            com_xy: (2,) kinematic CoM [m].
+            w2: ``F_z / (m h)`` [1/s^2].
+            u_xy: (2,) angular-momentum input [m/s^2].
+
+        Returns:
+            ``(zmp, com)``: filtered ZMP (2,) and CoM (2,) [m].
+        """
+        c = np.asarray(com_xy, float)
+        if self.x is None:
+            self.x = np.stack([c, np.zeros(2), c])
+        t = self.dt
+        A = np.array([[1.0, t, 0.0], [w2 * t, 1.0, -w2 * t], [0.0, 0.0, 1.0]])
+        x = A @ self.x
+        x[1] += t * np.asarray(u_xy, float)
+        P = A @ self.P @ A.T + self.Q
+        # scalar measurement of c (H = [1, 0, 0])
+        s = P[0, 0] + self.R
+        K = P[:, 0] / s
+        innov = c - x[0]
+        self.x = x + np.outer(K, innov)
+        self.P = P - np.outer(K, P[0, :])
+        return self.x[2].copy(), self.x[0].copy()

@@ -61,9 +61,9 @@ class VFSConfig:
     #: ``fusion_cutoff`` and from leg odometry below it (removes the accelerometer bias and
     #: the lag of differentiating odometry); the CoM motion relative to the IMU comes from
     #: kinematics through the ``filter_cutoff`` low-pass.
-    use_accelerometer: bool = False
+    use_accelerometer: bool = True
     #: Cross-over of the accelerometer / odometry complementary filter in [Hz].
-    fusion_cutoff: float = 2.0
+    fusion_cutoff: float = 1.0
     #: Low-pass on the accelerometer (white noise) in [Hz].
     acc_cutoff: float = 40.0
     #: Order of the Butterworth filters.
@@ -77,6 +77,16 @@ class VFSConfig:
     #: IMU attitude at high frequency) is pulled toward the IMU attitude in [s]; 0 uses
     #: the IMU attitude directly.
     anchor_attitude_time_constant: float = 0.0
+    #: ZMP from the multibody rates: ``direct`` (Newton-Euler with the filtered rates) or
+    #: ``kalman`` (pendulum Kalman filter with the ZMP as a state on the kinematic CoM,
+    #: :class:`grfguard.estimate.com.ZMPKalmanFilter`; best without accelerometer).
+    zmp_filter: str = "direct"
+    #: Spectral density of the ZMP velocity random walk of that filter in [m^2/s].
+    zmp_rate_psd: float = 20.0
+    #: Spectral density of its CoM acceleration model error in [m^2/s^3].
+    com_acc_psd: float = 0.1
+    #: Noise of the kinematic CoM measurement in [m].
+    com_sigma: float = 2e-3
     #: Include the centroidal angular momentum rate in the ZMP (multibody only).
     use_angular_momentum: bool = True
     #: Corner height above the ground plane below which a corner counts as touching, in [m]
@@ -122,6 +132,13 @@ class VFSConfig:
                 raise ConfigError(f"vfs.{flag} must be true or false, got {getattr(self, flag)!r}")
         _num("attitude_time_constant", self.attitude_time_constant, 0.0, 1e3, "s")
         _num("anchor_attitude_time_constant", self.anchor_attitude_time_constant, 0.0, 1e3, "s")
+        if self.zmp_filter not in ("kalman", "direct"):
+            raise ConfigError(
+                f"vfs.zmp_filter = {self.zmp_filter!r} is unknown; use 'kalman' or 'direct'"
+            )
+        _num("zmp_rate_psd", self.zmp_rate_psd, 1e-12, 1e6, "m^2/s")
+        _num("com_acc_psd", self.com_acc_psd, 1e-12, 1e6, "m^2/s^3")
+        _num("com_sigma", self.com_sigma, 1e-9, 1.0, "m")
         _num("contact_height", self.contact_height, 0.0, 0.1, "m")
         _num("lipm_height", self.lipm_height, 0.0, 5.0, "m")
         _num("paper_process_noise", self.paper_process_noise, 1e-12, 1e12, "m^2/s^5")

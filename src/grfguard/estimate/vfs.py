@@ -32,6 +32,7 @@ from grfguard.estimate.com import (
     CausalLowPass,
     LegOdometry,
     PaperCoMFilter,
+    ZMPKalmanFilter,
     zmp_from_momentum,
 )
 from grfguard.estimate.config import VFSConfig
@@ -193,6 +194,7 @@ class VirtualForceSensor:
         self._prev_frames: KinematicFrames | None = None
         self._prev_L: np.ndarray | None = None
         self._paper: PaperCoMFilter | None = None
+        self._zkf = ZMPKalmanFilter(c.dt, c.zmp_rate_psd, c.com_acc_psd, c.com_sigma)
         self._p_act_prev: np.ndarray | None = None
         self._last: dict[str, float] | None = None
 
@@ -272,7 +274,7 @@ class VirtualForceSensor:
                 raw[None], None if acc_W is None else acc_W[None], stream=True
             )
             force = self.mass * (c_dd[0] + np.array([0.0, 0.0, self.g]))
-            zmp = zmp_from_momentum(com_W, force, ld[0], ground)
+            zmp = self._zmp(com_W[None], force[None], ld, np.array([ground]))[0]
             com_out = com_W
         else:
             com_out, force, zmp = self._paper_step(
@@ -333,6 +335,22 @@ class VirtualForceSensor:
             c_dd = main[:, 0:3] + main[:, 6:9]
         ld = main[:, 3:6] if c.use_angular_momentum else np.zeros_like(main[:, 3:6])
         return c_dd, ld
+
+    def _zmp(
+        self, com_W: np.ndarray, force: np.ndarray, ld: np.ndarray, ground: np.ndarray
+    ) -> np.ndarray:
+        """ZMP (T, 2) from CoM, total force and angular momentum rate (T, 3) each."""
+        if self.config.zmp_filter == "direct":
+            return zmp_from_momentum(com_W, force, ld, ground)
+        h = np.maximum(com_W[:, 2] - ground, 1e-3)
+        fz = np.maximum(force[:, 2], 1.0)
+        w2 = fz / (self.mass * h)
+        u = np.stack([-ld[:, 1], ld[:, 0]], axis=1) / (self.mass * h)[:, None]
+        out = np.empty((com_W.shape[0], 2))
+        kf = self._zkf
+        for i in range(com_W.shape[0]):
+            out[i] = kf.update(com_W[i, :2], float(w2[i]), u[i])[0]
+        return out
 
     def _paper_filter(self, com_z_rel: float) -> PaperCoMFilter:
         c = self.config
@@ -482,7 +500,7 @@ class VirtualForceSensor:
                 acc_W = acc_W - np.array([0.0, 0.0, self.g])
             c_dd, ld = self._filter_rates(raw, acc_W, stream=False)
             force = self.mass * (c_dd + np.array([0.0, 0.0, self.g]))
-            zmp = zmp_from_momentum(com_W, force, ld, ground)
+            zmp = self._zmp(com_W, force, ld, ground)
             com_out = com_W
         else:
             com_out = np.empty((m, 3))
