@@ -48,7 +48,14 @@ CHROMIUM_FLAGS: tuple[str, ...] = (
 
 
 def find_chromium() -> str | None:
-    """Path of a Chromium binary (``/usr/bin/chromium`` first), or None."""
+    """Path of a Chromium binary, or None.
+
+    ``GRFGUARD_CHROMIUM`` (environment) names the binary explicitly (None if it is not
+    an executable file); otherwise ``/usr/bin/chromium`` first, then the ``PATH``.
+    """
+    forced = os.environ.get("GRFGUARD_CHROMIUM")
+    if forced:
+        return forced if os.path.isfile(forced) and os.access(forced, os.X_OK) else None
     for cand in ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome"):
         if os.path.isabs(cand):
             if os.access(cand, os.X_OK):
