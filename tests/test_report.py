@@ -295,6 +295,17 @@ def test_html_missing_columns(run_df: pd.DataFrame) -> None:
     assert all("yaxis2" not in sp["layout"] for sp in specs)
 
 
+def test_html_nan_samples(run_df: pd.DataFrame) -> None:
+    df = run_df.copy()
+    df.loc[:499, ["vfs_r1", "eta_r1", "recovered_r1", "vfs_total_r"]] = np.nan  # start-up
+    df["flag_r1"] = df["flag_r1"].astype(object)
+    df.loc[:99, "flag_r1"] = None
+    sp = _payload(build_html_report(df))[0]
+    vfs = next(tr for tr in sp["data"] if tr["meta"]["column"] == "vfs_r1")
+    y = _decode(vfs["y"])
+    assert np.isnan(y).any() and np.isfinite(y).sum() > 100  # a gap, then the signal
+
+
 def test_html_deterministic(run_df: pd.DataFrame) -> None:
     assert build_html_report(run_df) == build_html_report(synthetic_run(duration_s=12.0, seed=3))
 
