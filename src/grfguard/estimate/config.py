@@ -89,6 +89,12 @@ class VFSConfig:
     com_sigma: float = 2e-3
     #: Include the centroidal angular momentum rate in the ZMP (multibody only).
     use_angular_momentum: bool = True
+    #: Corner contact stiffness per kg of robot mass in [N/(m kg)] for the sole-compliance
+    #: prior of the corner QP (:mod:`grfguard.estimate.compliance`: lower corners carry
+    #: more load; recovers the internal forces between the feet that a rigid QP cannot
+    #: see). MuJoCo's default soft contact measured 4.2e3 (SURALP 114 kg: 4.8e5 N/m; the
+    #: 60 kg robot: 2.5e5 N/m); calibrate it for a real sole. 0 disables the prior.
+    contact_stiffness_per_kg: float = 4200.0
     #: Corner height above the ground plane below which a corner counts as touching, in [m]
     #: (kinematic contact; heel-first landing and toe-off).
     contact_height: float = 0.003
@@ -139,6 +145,7 @@ class VFSConfig:
         _num("zmp_rate_psd", self.zmp_rate_psd, 1e-12, 1e6, "m^2/s")
         _num("com_acc_psd", self.com_acc_psd, 1e-12, 1e6, "m^2/s^3")
         _num("com_sigma", self.com_sigma, 1e-9, 1.0, "m")
+        _num("contact_stiffness_per_kg", self.contact_stiffness_per_kg, 0.0, 1e8, "N/(m kg)")
         _num("contact_height", self.contact_height, 0.0, 0.1, "m")
         _num("lipm_height", self.lipm_height, 0.0, 5.0, "m")
         _num("paper_process_noise", self.paper_process_noise, 1e-12, 1e12, "m^2/s^5")
@@ -155,6 +162,7 @@ class VFSConfig:
             "split_method": "paper",
             "qp_weight": 0.01,
             "kinematic_contact": False,
+            "contact_stiffness_per_kg": 0.0,
         }
         kw.update(overrides)
         return cls(**kw)

@@ -35,6 +35,11 @@ from grfguard.estimate.com import (
     ZMPKalmanFilter,
     zmp_from_momentum,
 )
+from grfguard.estimate.compliance import (
+    compliance_prior,
+    solve_with_prior,
+    split_with_prior,
+)
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.kinematic import (
     AttitudeFilter,
@@ -164,6 +169,8 @@ class VirtualForceSensor:
         self.mass = self.kin.mass
         self.g = self.robot.gravity
         self.points_F = self.robot.sensor_positions_in_foot()
+        #: Corner contact stiffness of the compliance prior [N/m] (0: rigid QP).
+        self.contact_stiffness = self.config.contact_stiffness_per_kg * self.mass
         self.reset()
 
     # ------------------------------------------------------------------ construction
@@ -388,7 +395,12 @@ class VirtualForceSensor:
         if c.split_method == "qp":
             h = p_WK[:, 2] - ground
             contact = corner_contact(h, st, c.contact_height, c.kinematic_contact)
-            forces = split_qp_one(p_WK[:, :2], contact, zmp, float(force[2]), c.qp_weight)
+            if self.contact_stiffness > 0:
+                fz = float(force[2])
+                prior = compliance_prior(p_WK[:, 2], contact, fz, self.contact_stiffness)
+                forces = solve_with_prior(p_WK[:, :2] - zmp, prior, fz, c.qp_weight, contact)
+            else:
+                forces = split_qp_one(p_WK[:, :2], contact, zmp, float(force[2]), c.qp_weight)
             feet = contact.reshape(2, 4).any(axis=1)
             return forces, feet
         forces = self._split_paper(
@@ -516,7 +528,12 @@ class VirtualForceSensor:
         if c.split_method == "qp":
             h = p_WK[:, :, 2] - ground[:, None]
             contact = corner_contact(h, st, c.contact_height, c.kinematic_contact)
-            forces = split_qp(p_WK[:, :, :2], contact, zmp, force[:, 2], c.qp_weight)
+            if self.contact_stiffness > 0:
+                forces = split_with_prior(
+                    p_WK, contact, zmp, force[:, 2], c.qp_weight, self.contact_stiffness
+                )
+            else:
+                forces = split_qp(p_WK[:, :, :2], contact, zmp, force[:, 2], c.qp_weight)
             feet = contact.reshape(m, 2, 4).any(axis=2)
         else:
             forces = self._split_paper(
