@@ -251,7 +251,7 @@ _STATE_JS = """
   });
   const nav = performance.getEntriesByType('navigation')[0] || {};
   return {ready: !!s.ready, errors: s.errors || [], renderMs: s.renderMs ?? null,
-          readyAtMs: s.readyAtMs ?? null,
+          readyAtMs: s.readyAtMs ?? null, firstFigureAtMs: s.firstFigureAtMs ?? null,
           domContentLoadedMs: nav.domContentLoadedEventEnd ?? null,
           loadEventMs: nav.loadEventEnd ?? null,
           figures: figs, summaryRows: document.querySelectorAll('#summary tbody tr').length,

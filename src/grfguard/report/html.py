@@ -593,17 +593,23 @@ td:first-child{text-align:left;font-weight:600}
 
 _JS = """
 (function () {
-  var status = {ready: false, figures: [], errors: [], renderMs: null, readyAtMs: null};
+  var status = {ready: false, figures: [], errors: [], renderMs: null, readyAtMs: null,
+                firstFigureAtMs: null};
   window.grfguardReport = status;
   var specs = JSON.parse(document.getElementById('grfguard-data').textContent);
   var config = {responsive: true, displaylogo: false, scrollZoom: false,
                 modeBarButtonsToRemove: ['lasso2d', 'select2d']};
   var t0 = performance.now();
-  var chain = Promise.resolve();
+  // One figure per task: the page paints (table, first figures) while the rest draw.
+  function nextTask() { return new Promise(function (r) { setTimeout(r, 0); }); }
+  var chain = nextTask();
   specs.forEach(function (spec) {
     status.figures.push({id: spec.id, sensor: spec.sensor, n_traces: spec.n_traces});
     chain = chain.then(function () {
       return Plotly.newPlot(spec.id, spec.data, spec.layout, config);
+    }).then(function () {
+      if (status.firstFigureAtMs === null) { status.firstFigureAtMs = performance.now(); }
+      return nextTask();
     }).catch(function (err) { status.errors.push(String(err)); });
   });
   chain.then(function () {
