@@ -84,6 +84,7 @@ def main() -> None:
 
     rng = np.random.default_rng(args.seed)
     T = args.samples
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     sole = SURALP.sensor_positions_in_foot()
     w = DEFAULT_WEIGHT
     rows: list[tuple[str, str, str, str]] = []
@@ -179,8 +180,10 @@ def main() -> None:
                 print(rows[-1])
 
     load = os.getloadavg()
+    share = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
     env = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-           f"load average {load[0]:.1f} during the run, numpy {np.__version__}")
+           f"load average {load[0]:.1f}, this process got {share:.0%} of a CPU over the run, "
+           f"numpy {np.__version__}")
     table = ["| solver | problem | time | notes |", "|---|---|---|---|"]
     table += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
     text = "\n".join(
@@ -191,7 +194,8 @@ def main() -> None:
             f"(seed {args.seed}, w = {w} m²; {env}).",
             "Walking-like data: 20 % unloaded, CoP uniform over the sensor rectangle, 10 % up to "
             "2 cm outside it. Batch times include validation, NaN handling and the KKT "
-            "diagnostics.",
+            "diagnostics. Times scale with the CPU share above (other sessions share the "
+            "machine); compare rows within one run.",
             "",
             *table,
             "",
