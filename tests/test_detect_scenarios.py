@@ -40,7 +40,9 @@ def paper_faults(side: str) -> list[str]:
 
 @pytest.fixture(scope="module")
 def walk(default_walk: pd.DataFrame) -> pd.DataFrame:
-    return with_vfs(default_walk)
+    """The first 20 s of the 60 s default walk with its VFS (the full 60 s run is in
+    benchmarks/bench_monitor.py); the faults are permanent from 5 s to the end."""
+    return with_vfs(default_walk.iloc[:20000])
 
 
 @pytest.fixture(scope="module")
@@ -141,19 +143,3 @@ def test_single_fault_detected_and_classified(walk: pd.DataFrame, name: str) -> 
     # a gain only shows in stance, through the foot-total balance (coarse VFS total)
     assert tab.loc["l2", "delay_s"] < (5.0 if kind == "gain" else 2.0)
     assert np.isfinite(res["recovered_l2"].to_numpy()).all()
-
-
-@pytest.fixture(scope="module")
-def fault_free(walk, fast_gait_walk, slow_gait_walk) -> list[pd.DataFrame]:
-    return [walk, with_vfs(fast_gait_walk), with_vfs(slow_gait_walk)]
-
-
-def test_fault_free_walks_zero_alarms(fault_free: list[pd.DataFrame]) -> None:
-    """Shipped thresholds (calibrated on other seeds): no alarm on the three gaits.
-
-    The full 10-minute check runs in benchmarks/bench_monitor.py.
-    """
-    for log in fault_free:
-        res = Monitor.for_log(log).run(log)
-        flags = res[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy()
-        assert not flags.any(), (log.attrs.get("gait"), flags.sum(axis=0))
