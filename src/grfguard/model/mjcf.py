@@ -26,6 +26,12 @@ Naming contract (everyone relies on it):
   ``truth_sole_{s}_quat`` and ``truth_corner_{s}{k}_pos``;
 * position actuators named as the joints.
 
+Caveat: MuJoCo's ``accelerometer`` (``imu_acc``) is computed from the explicit ``qacc``
+of ``mj_forward``; with ``implicitfast`` and stiff servo damping the velocity actually
+changes by a different amount, and the sensor is off by ~0.3 m/s^2 RMS. The simulation
+log (:func:`grfguard.sim.simulate`) therefore computes the accelerometer from the IMU
+site's velocity (``truth_imu_linvel``) instead.
+
 Scaling: gains and armature are given for SURALP (114 kg, hip-to-sole 0.674 m) and
 scaled with the robot so another size walks without hand tuning: ``kp`` with the
 gravity torque scale ``m g L``, armature with ``m L^2`` (so the servo bandwidth scales
