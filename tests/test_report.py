@@ -357,7 +357,9 @@ def test_pngs_written_and_not_blank(pngs: list[Path]) -> None:
     names = {p.stem for p in pngs}
     assert {"fig4_vfs_vs_true", "fig5_fault_estimate", "fig6_recovery", "fig7_flags",
             "detection_timeline", "summary_table"} <= names
-    assert {f"sensor_{s}" for s in SENSOR_NAMES} <= names
+    # Per-sensor figures by default only where something happened (faults r1-r4, alarm l2).
+    assert {n for n in names if n.startswith("sensor_")} == {
+        "sensor_r1", "sensor_r2", "sensor_r3", "sensor_r4", "sensor_l2"}
     for p in pngs:
         img = imread(p)[..., :3]
         assert img.shape[0] > 100 and img.shape[1] > 300
@@ -365,6 +367,16 @@ def test_pngs_written_and_not_blank(pngs: list[Path]) -> None:
         assert 0.02 < non_white < 0.9, f"{p.name}: {non_white:.3f} non-white"
         colours = (img[::3, ::3] * 255).astype(np.int64).reshape(-1, 3)
         assert np.unique(colours[:, 0] * 65536 + colours[:, 1] * 256 + colours[:, 2]).size > 20
+
+
+def test_png_options(run_df: pd.DataFrame, tmp_path: Path) -> None:
+    from grfguard.report import write_png_figures
+
+    few = run_df[["time", "force_r1", "vfs_r1", "force_l1", "vfs_l1"]]
+    paths = write_png_figures(few, tmp_path, dpi=30, per_sensor=["l1"])
+    assert [p.stem for p in paths] == ["fig4_vfs_vs_true", "summary_table", "sensor_l1"]
+    with pytest.raises(ConfigError, match="dpi"):
+        write_png_figures(few, tmp_path, dpi=0)
 
 
 def test_figures_content(run_df: pd.DataFrame) -> None:

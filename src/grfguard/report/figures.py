@@ -582,22 +582,32 @@ def write_png_figures(
     metrics: Mapping[str, Mapping[str, Any]] | Any | None = None,
     dpi: int = 150,
     t_range: tuple[float, float] | None = None,
+    per_sensor: bool | Sequence[str] | None = None,
 ) -> list[Path]:
     """Write the paper's Figures 4-7 and the extras as PNG files (Agg backend).
 
-    Figures whose columns are missing from ``df`` are skipped (Fig. 5 needs ``eta_*``,
-    Fig. 6 ``recovered_*``, Fig. 7 and the timeline ``flag_*``).
+    Files: ``fig4_vfs_vs_true``, ``fig5_fault_estimate``, ``fig6_recovery``,
+    ``fig7_flags``, ``detection_timeline``, ``summary_table`` and ``sensor_<s>`` per
+    sensor. Figures whose columns are missing from ``df`` are skipped (Fig. 5 needs
+    ``eta_*``, Fig. 6 ``recovered_*``, Fig. 7 and the timeline ``flag_*``).
 
     Args:
         df: Output of ``grfguard run``.
         out_dir: Directory to write to (created).
-        metrics: Optional per-sensor metrics for the summary table.
+        metrics: Optional per-sensor metrics for the summary table and Fig. 7.
         dpi: Resolution in dots per inch.
         t_range: ``(start, end)`` in [s]; default see module docstring.
+        per_sensor: Which ``sensor_<s>`` figures to write: None (default) the sensors
+            with an injected fault or an alarm, True all, False none, or a list of names.
 
     Returns:
         The PNG paths written, in order.
+
+    Raises:
+        ConfigError: If ``dpi`` is not a positive integer.
     """
+    if not (isinstance(dpi, int) and 10 <= dpi <= 1200):
+        raise ConfigError(f"dpi = {dpi!r} must be an integer in [10, 1200]")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     out = Path(out_dir)
@@ -616,7 +626,19 @@ def write_png_figures(
         jobs.append(("fig7_flags", lambda: plot_flags(df, t_range=t_range, metrics=metrics)))
         jobs.append(("detection_timeline", lambda: plot_detection_timeline(df, t_range=t_range)))
     jobs.append(("summary_table", lambda: plot_summary_table(df, metrics)))
-    for s in detect_sensors(df):
+    if per_sensor is None:
+        chosen = [
+            s for s in detect_sensors(df)
+            if alarm_onsets(df, s).size
+            or ((m := fault_mask(df, s)) is not None and bool(m.any()))
+        ]
+    elif per_sensor is True:
+        chosen = detect_sensors(df)
+    elif per_sensor is False:
+        chosen = []
+    else:
+        chosen = [str(s) for s in per_sensor]
+    for s in chosen:
         jobs.append((f"sensor_{s}", lambda s=s: plot_sensor(df, s, t_range=t_range)))
     paths = []
     for name, make in jobs:
