@@ -253,13 +253,26 @@ def test_streaming_solver_two_rows_matches_batch():
     assert np.abs(stream - batch).max() < 1e-9
 
 
-def test_solve_one_matches_batch():
+@pytest.mark.parametrize(("n", "g", "w"), [(4, 1, 1e-6), (8, 2, 1e-6), (8, 1, 1e-8)])
+def test_solve_one_matches_batch(n, g, w):
     rng = np.random.default_rng(13)
-    pts, d, b = _random_problems(rng, 200, 8, 2, fixed=False)
-    G = two_feet_equality()
-    batch = solve_distribution_batch(pts, d, b, 1e-6, G).forces
-    one = np.array([solve_distribution_one(pts[t], d[t], b[t], 1e-6, G) for t in range(200)])
+    pts, d, b = _random_problems(rng, 300, n, g, fixed=False)
+    G = two_feet_equality() if g == 2 else None
+    batch = solve_distribution_batch(pts, d, b, w, G).forces
+    one = np.array([solve_distribution_one(pts[t], d[t], b[t], w, G) for t in range(300)])
     assert np.abs(one - batch).max() < 1e-9
+
+
+def test_solve_one_degenerate():
+    assert np.all(np.isnan(solve_distribution_one(SOLE, [np.nan, 0.0], 100.0)))
+    assert np.all(solve_distribution_one(SOLE, [1.0, 0.0], -5.0) == 0.0)
+    G = two_feet_equality()
+    pts = np.concatenate([SOLE, SOLE + [0.0, 0.2]])
+    zero = np.r_[np.zeros(4, bool), np.ones(4, bool)]
+    assert np.all(np.isnan(solve_distribution_one(pts, [0.0, 0.0], [100.0, 100.0], G=G,
+                                                  zero_mask=zero)))
+    out = solve_distribution_one(pts, [0.0, 0.0], [100.0, 0.0], G=G, zero_mask=zero)
+    assert out[:4].sum() == pytest.approx(100.0) and np.all(out[4:] == 0.0)
 
 
 def test_streaming_nan_and_negative():

@@ -77,6 +77,7 @@ path with T = 1) return the numbers of :func:`solve_distribution_batch` to 1e-9 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -1281,6 +1282,60 @@ class DistributionSolver:
         return tuple(float(v) for v in sol.forces[0])
 
 
+def _evaluate_one(
+    px: list[float], py: list[float], w: list[float], Gl: list[list[float]],
+    free: list[bool], kept: list[bool], x: tuple[float, ...],
+) -> tuple[list[float], list[float], list[float]]:
+    """:func:`_evaluate` for one sample in plain Python floats: N, λ, μ."""
+    n, g = len(px), len(Gl)
+    k = 2 + g
+    w_min = min(w)
+    a = [w_min / w[i] if free[i] else 0.0 for i in range(n)]
+    rows = [px, py, *Gl]
+    ar = [[a[i] * r[i] for i in range(n)] for r in rows]
+    A = [[0.0] * k for _ in range(k)]
+    for p in range(k):
+        for q in range(p + 1):
+            v = 0.0
+            arp, rq = ar[p], rows[q]
+            for i in range(n):
+                v += arp[i] * rq[i]
+            A[p][q] = v
+            A[q][p] = v
+    A[0][0] += w_min
+    A[1][1] += w_min
+    rhs = [x[0], x[1]]
+    for j in range(g):
+        if kept[j]:
+            rhs.append(x[2 + j])
+        else:
+            rhs.append(0.0)
+            for q in range(k):
+                A[2 + j][q] = 0.0
+                A[q][2 + j] = 0.0
+            A[2 + j][2 + j] = 1.0
+    # Cholesky
+    L = [[0.0] * k for _ in range(k)]
+    for j in range(k):
+        acc = A[j][j] - sum(L[j][p] * L[j][p] for p in range(j))
+        if not acc > 0.0:
+            return [math.nan] * n, [math.nan] * g, [math.nan] * n
+        L[j][j] = math.sqrt(acc)
+        for i in range(j + 1, k):
+            L[i][j] = (A[i][j] - sum(L[i][p] * L[j][p] for p in range(j))) / L[j][j]
+    y = [0.0] * k
+    for i in range(k):
+        y[i] = (rhs[i] - sum(L[i][p] * y[p] for p in range(i))) / L[i][i]
+    z = [0.0] * k
+    for i in reversed(range(k)):
+        z[i] = (y[i] - sum(L[p][i] * z[p] for p in range(i + 1, k))) / L[i][i]
+    h = [px[i] * z[0] + py[i] * z[1] + sum(Gl[j][i] * z[2 + j] for j in range(g)) for i in range(n)]
+    N = [a[i] * h[i] for i in range(n)]
+    mu = [0.0 if free[i] else -h[i] * w_min for i in range(n)]
+    lam = [z[2 + j] * w_min for j in range(g)]
+    return N, lam, mu
+
+
 def solve_distribution_one(
     points: Any,
     d: Any,
@@ -1291,8 +1346,11 @@ def solve_distribution_one(
 ) -> np.ndarray:
     """Solve one sample of the contact-point QP (points may change every call).
 
-    Same path as :func:`solve_distribution_batch` with per-sample points (T = 1);
-    for fixed points at 1 kHz use :class:`DistributionSolver`, which is faster.
+    The active-set search runs in plain Python floats (same steps and tolerances as
+    the batch solver); the free set found is then solved once more in extended
+    precision, exactly as :func:`solve_distribution_batch` does for per-sample
+    points, so both agree to rounding. For fixed points at 1 kHz
+    :class:`DistributionSolver` is faster still.
 
     Args:
         points: (n, 2) contact points in [m].
@@ -1308,8 +1366,111 @@ def solve_distribution_one(
     pts = _check_points(points)
     if pts.ndim != 2:
         raise ConfigError(f"solve_distribution_one: `points` must be (n, 2) [m], got {pts.shape}")
-    d_arr = _as_float("d", d).reshape(1, -1)
-    b_arr = np.atleast_1d(_as_float("b", b)).reshape(1, -1)
-    zm = None if zero_mask is None else np.asarray(zero_mask, dtype=bool).reshape(1, -1)
-    sol = solve_distribution_batch(pts[None], d_arr, b_arr, weight, G, zero_mask=zm)
-    return sol.forces[0]
+    n = pts.shape[0]
+    w_arr = _check_weight(weight, n)
+    g_mat = _check_equality(G, n)
+    g = g_mat.shape[0]
+    d_arr = _as_float("d", d).reshape(-1)
+    b_arr = np.atleast_1d(_as_float("b", b)).reshape(-1)
+    if d_arr.shape != (2,) or b_arr.shape != (g,):
+        raise ConfigError(
+            f"solve_distribution_one: `d` must be (2,) [N·m] and `b` ({g},) [N], got "
+            f"{d_arr.shape} and {b_arr.shape}"
+        )
+    zm = [False] * n if zero_mask is None else [bool(v) for v in np.asarray(zero_mask).reshape(-1)]
+    if len(zm) != n:
+        raise ConfigError(f"solve_distribution_one: `zero_mask` must be ({n},), got {len(zm)}")
+    px, py = pts[:, 0].tolist(), pts[:, 1].tolist()
+    dl, bl = d_arr.tolist(), b_arr.tolist()
+    if not all(math.isfinite(v) for v in (*px, *py, *dl, *bl)):
+        return np.full(n, np.nan)
+    w = w_arr.tolist()
+    Gl = g_mat.tolist()
+    groups = [[i for i in range(n) if Gl[j][i] > 0.0] for j in range(g)]
+    bc = [v if v > 0.0 else 0.0 for v in bl]
+    kept = [v > 0.0 for v in bc]
+    forced = list(zm)
+    for j in range(g):
+        if not kept[j]:
+            for i in groups[j]:
+                forced[i] = True
+    for j in range(g):
+        if kept[j] and all(forced[i] for i in groups[j]):
+            return np.full(n, np.nan)  # infeasible
+    x = (dl[0], dl[1], *bc)
+    p_scale = max(max(abs(v) for v in px), max(abs(v) for v in py)) or 1.0
+    dn = max(abs(dl[0]), abs(dl[1]))
+    s_n = max(max(bc), dn / p_scale) + 1e-300
+    w_max = max(w)
+    grouped = [any(Gl[j][i] > 0.0 for j in range(g)) for i in range(n)]
+
+    def mu_scale(N: list[float], lam: list[float]) -> float:
+        cx = dl[0] - sum(px[i] * N[i] for i in range(n))
+        cy = dl[1] - sum(py[i] * N[i] for i in range(n))
+        return w_max * s_n + p_scale * max(abs(cx), abs(cy)) + max(map(abs, lam)) + 1e-300
+
+    def repair(f: list[bool]) -> list[bool]:
+        for j in range(g):
+            if kept[j] and not any(f[i] for i in groups[j]):
+                for i in groups[j]:
+                    f[i] = not forced[i]
+        return f
+
+    free = [not forced[i] and grouped[i] for i in range(n)]
+    found = None
+    for _ in range(_PDAS_ITER):  # phase 1: primal-dual active set
+        N, lam, mu = _evaluate_one(px, py, w, Gl, free, kept, x)
+        smu = mu_scale(N, lam)
+        bad_n = any(free[i] and N[i] < -_TOL * s_n for i in range(n))
+        bad_mu = any(not free[i] and not forced[i] and mu[i] < -_TOL * smu for i in range(n))
+        if not (bad_n or bad_mu):
+            found = free
+            break
+        free = repair([
+            not forced[i] and ((free[i] and N[i] > 0.0) or (not free[i] and mu[i] < -_TOL * smu))
+            for i in range(n)
+        ])
+    if found is None:  # phase 2: primal active set from a feasible start
+        free = [not forced[i] and grouped[i] for i in range(n)]
+        Ncur = [0.0] * n
+        for j in range(g):
+            if kept[j]:
+                tot = sum(Gl[j][i] for i in groups[j] if free[i])
+                for i in groups[j]:
+                    if free[i]:
+                        Ncur[i] = bc[j] / tot
+        for _ in range(4 * n + 4):
+            N, lam, mu = _evaluate_one(px, py, w, Gl, free, kept, x)
+            alpha, blk = 1.0, -1
+            for i in range(n):
+                if free[i] and N[i] < -_TOL * s_n:
+                    a_i = Ncur[i] / (Ncur[i] - N[i])
+                    if a_i < alpha:
+                        alpha, blk = a_i, i
+            if blk >= 0:
+                Ncur = [Ncur[i] + alpha * (N[i] - Ncur[i]) if free[i] else 0.0 for i in range(n)]
+                Ncur[blk] = 0.0
+                free[blk] = False
+                continue
+            Ncur = [N[i] if free[i] and N[i] > 0.0 else 0.0 for i in range(n)]
+            smu = mu_scale(Ncur, lam)
+            worst, k = -_TOL * smu, -1
+            for i in range(n):
+                if not free[i] and not forced[i] and mu[i] < worst:
+                    worst, k = mu[i], i
+            if k < 0:
+                found = free
+                break
+            free[k] = True
+    if found is None:  # degenerate cycling: the batch path with its enumeration
+        sol = solve_distribution_batch(
+            pts[None], d_arr[None], b_arr[None], w_arr, g_mat, zero_mask=np.array([zm])
+        )
+        return sol.forces[0]
+    ld = np.longdouble
+    Nl, _, _, _ = _evaluate(
+        pts[None, :, 0].astype(ld), pts[None, :, 1].astype(ld), w_arr.astype(ld),
+        g_mat.astype(ld), np.array([found]), np.array([kept]),
+        np.array([dl], dtype=ld), np.array([bc], dtype=ld),
+    )
+    return np.where(found, np.maximum(Nl[0], 0.0), 0.0).astype(float)
