@@ -27,6 +27,8 @@ the equality as a heavily weighted row, then rescaled to the exact sum.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.optimize import nnls
 
@@ -46,6 +48,23 @@ def compliance_prior(
     z = corner_z_m[idx]
     out[idx] = total_force_n / idx.size + stiffness_n_m * (z.mean() - z)
     return out
+
+
+def _solve_core(rel: np.ndarray, prior: np.ndarray, total: float, sw: float) -> np.ndarray:
+    """NNLS on the contact corners only: rel (m, 2) [m], prior (m,) [N]."""
+    m = rel.shape[0]
+    A = np.zeros((3 + m, m))
+    A[0:2] = rel.T
+    A[2] = _RHO
+    A.reshape(-1)[3 * m :: m + 1] = sw
+    y = np.zeros(3 + m)
+    y[2] = _RHO * total
+    y[3:] = sw * prior
+    x = nnls(A, y, maxiter=50 * m)[0]
+    s = x.sum()
+    if s > 0:
+        x *= total / s
+    return x
 
 
 def solve_with_prior(
@@ -70,26 +89,13 @@ def solve_with_prior(
     n = points_rel_m.shape[0]
     out = np.zeros(n)
     idx = np.flatnonzero(contact)
-    if not (np.isfinite(total_force_n) and np.all(np.isfinite(points_rel_m[idx]))
-            and np.all(np.isfinite(prior_n[idx]))):
+    rel = points_rel_m[idx]
+    pr = prior_n[idx]
+    if not (math.isfinite(total_force_n) and np.isfinite(rel.sum() + pr.sum())):
         return np.full(n, np.nan)
     if idx.size == 0 or total_force_n <= 0.0:
         return out
-    m = idx.size
-    sw = np.sqrt(weight)
-    A = np.empty((3 + m, m))
-    A[0:2] = points_rel_m[idx].T
-    A[2] = _RHO
-    A[3:] = sw * np.eye(m)
-    y = np.empty(3 + m)
-    y[0:2] = 0.0
-    y[2] = _RHO * total_force_n
-    y[3:] = sw * prior_n[idx]
-    x, _ = nnls(A, y, maxiter=50 * m)
-    s = x.sum()
-    if s > 0:
-        x *= total_force_n / s
-    out[idx] = x
+    out[idx] = _solve_core(rel, pr, total_force_n, math.sqrt(weight))
     return out
 
 
@@ -105,8 +111,15 @@ def split_with_prior(
     total force (T,) [N]; returns (T, n) forces [N]."""
     T, n = contact.shape
     out = np.empty((T, n))
+    # vectorized prior (same arithmetic as compliance_prior)
+    z = corners_W[:, :, 2]
+    cnt = contact.sum(axis=1)
+    safe = np.maximum(cnt, 1)
+    zbar = np.where(contact, z, 0.0).sum(axis=1) / safe
+    prior = np.where(
+        contact, (total_force_n / safe)[:, None] + stiffness_n_m * (zbar[:, None] - z), 0.0
+    )
+    rel = corners_W[:, :, :2] - zmp_W[:, None, :]
     for i in range(T):
-        prior = compliance_prior(corners_W[i, :, 2], contact[i], total_force_n[i], stiffness_n_m)
-        rel = corners_W[i, :, :2] - zmp_W[i]
-        out[i] = solve_with_prior(rel, prior, float(total_force_n[i]), weight, contact[i])
+        out[i] = solve_with_prior(rel[i], prior[i], float(total_force_n[i]), weight, contact[i])
     return out

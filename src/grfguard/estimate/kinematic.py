@@ -12,6 +12,7 @@ sphere) in A [m]; ``R_WB`` body rotations (A and W share their orientation).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -113,6 +114,9 @@ class KinematicModel:
             raise ConfigError("the `imu` site must sit on the `trunk` body")
         #: Rotation of the IMU site in the trunk frame.
         self.R_TI = quat_to_matrix(np.array(m.site_quat[imu]))
+        q_TI = np.array(m.site_quat[imu], float)
+        #: Conjugate of the IMU site quaternion in the trunk: ``q_WT = q_WI (x) q_TI^-1``.
+        self._q_IT = np.array([q_TI[0], -q_TI[1], -q_TI[2], -q_TI[3]]) / np.linalg.norm(q_TI)
         self.corner_sites = np.array(
             [_id(mujoco.mjtObj.mjOBJ_SITE, f"{s}{k}") for s in SIDES for k in range(1, 5)],
             dtype=int,
@@ -146,9 +150,9 @@ class KinematicModel:
             :class:`KinematicFrames` without the time axis.
         """
         m, d = self.model, self.data
-        R_WT = self.trunk_rotation(quat_imu_wxyz)
         quat_t = np.empty(4)
-        mujoco.mju_mat2Quat(quat_t, R_WT.reshape(-1))
+        mujoco.mju_mulQuat(quat_t, np.asarray(quat_imu_wxyz, float), self._q_IT)
+        mujoco.mju_normalize4(quat_t)
         a = self.root_qadr
         d.qpos[a : a + 3] = 0.0
         d.qpos[a + 3 : a + 7] = quat_t
@@ -244,25 +248,23 @@ def angular_momentum_about_com(
     return lin + rot
 
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
     aw, ax, ay, az = a
     bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
     )
 
 
-def _qexp(rotvec: np.ndarray) -> np.ndarray:
-    th = float(np.sqrt(rotvec @ rotvec))
+def _qexp(x: float, y: float, z: float) -> tuple[float, float, float, float]:
+    th = math.sqrt(x * x + y * y + z * z)
     if th < 1e-12:
-        return np.array([1.0, 0.5 * rotvec[0], 0.5 * rotvec[1], 0.5 * rotvec[2]])
-    s = np.sin(0.5 * th) / th
-    return np.array([np.cos(0.5 * th), s * rotvec[0], s * rotvec[1], s * rotvec[2]])
+        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
+    s = math.sin(0.5 * th) / th
+    return (math.cos(0.5 * th), s * x, s * y, s * z)
 
 
 class AttitudeFilter:
@@ -285,7 +287,7 @@ class AttitudeFilter:
     def __init__(self, dt_s: float, time_constant_s: float) -> None:
         self.dt = dt_s
         self.k = dt_s / (time_constant_s + dt_s) if time_constant_s > 0 else 1.0
-        self.q: np.ndarray | None = None
+        self.q: tuple[float, float, float, float] | None = None
 
     def reset(self) -> None:
         """Forget the state."""
@@ -293,20 +295,21 @@ class AttitudeFilter:
 
     def update(self, quat_meas_wxyz: np.ndarray, gyro_rad_s: np.ndarray | None) -> np.ndarray:
         """One sample: filtered attitude (4,) ``w, x, y, z``."""
-        qm = np.asarray(quat_meas_wxyz, float)
-        qm = qm / np.sqrt(qm @ qm)
+        w, x, y, z = (float(v) for v in quat_meas_wxyz)
+        nm = math.sqrt(w * w + x * x + y * y + z * z)
+        qm = (w / nm, x / nm, y / nm, z / nm)
         if self.q is None or self.k >= 1.0 or gyro_rad_s is None:
             self.q = qm
-            return qm.copy()
-        q = _qmul(self.q, _qexp(np.asarray(gyro_rad_s, float) * self.dt))
-        e = _qmul(np.array([q[0], -q[1], -q[2], -q[3]]), qm)
-        if e[0] < 0:
-            e = -e
-        q = _qmul(q, _qexp(2.0 * self.k * e[1:]))
-        q = q / np.sqrt(q @ q)
-        self.q = q
-        return q.copy()
-
+            return np.array(qm)
+        dt = self.dt
+        gx, gy, gz = (float(v) * dt for v in gyro_rad_s)
+        q = _qmul(self.q, _qexp(gx, gy, gz))
+        e = _qmul((q[0], -q[1], -q[2], -q[3]), qm)
+        sgn = 2.0 * self.k if e[0] >= 0 else -2.0 * self.k
+        q = _qmul(q, _qexp(sgn * e[1], sgn * e[2], sgn * e[3]))
+        n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        self.q = (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+        return np.array(self.q)
 
 def rotate_frames(fr: KinematicFrames, R: np.ndarray) -> KinematicFrames:
     """Rotate every vector and orientation of ``fr`` by ``R`` ((3, 3) or (T, 3, 3))."""
