@@ -118,8 +118,12 @@ def main() -> None:
         sols[name] = solve_distribution_batch(p, d, b, w, G)
         fb = int(np.sum(sols[name].iterations == -1))
         rows.append(
-            ("batch `solve_distribution_batch`", name, f"{t / T * 1e9:.0f} ns/sample",
-             f"{T:.0e} samples, best of {args.repeat}; {fb} enumeration fallbacks")
+            (
+                "batch `solve_distribution_batch`",
+                name,
+                f"{t / T * 1e9:.0f} ns/sample",
+                f"{T:.0e} samples, best of {args.repeat}; {fb} enumeration fallbacks",
+            )
         )
         print(rows[-1])
 
@@ -130,21 +134,39 @@ def main() -> None:
     t = per_call(lambda i: solver4.solve(*r4[i]), K, args.repeat)
     stream4 = np.array([solver4.solve(*r4[i]) for i in range(K)])
     diff = np.abs(stream4 - sols[list(cases)[0]].forces[:K]).max()
-    rows.append(("streaming `DistributionSolver.solve`", "n=4, fixed sole points",
-                 f"{t * 1e6:.1f} µs/solve", f"max diff to batch {diff:.1e} N"))
+    rows.append(
+        (
+            "streaming `DistributionSolver.solve`",
+            "n=4, fixed sole points",
+            f"{t * 1e6:.1f} µs/solve",
+            f"max diff to batch {diff:.1e} N",
+        )
+    )
     print(rows[-1])
     solver8 = DistributionSolver(pts2, w, G2)
     r8 = [(float(d2[i, 0]), float(d2[i, 1]), (float(b2[i, 0]), float(b2[i, 1]))) for i in range(K)]
     t = per_call(lambda i: solver8.solve(*r8[i]), K, args.repeat)
     stream8 = np.array([solver8.solve(*r8[i]) for i in range(K)])
     diff = np.abs(stream8 - sols[list(cases)[2]].forces[:K]).max()
-    rows.append(("streaming `DistributionSolver.solve`", "n=8, two feet, per-foot sums",
-                 f"{t * 1e6:.1f} µs/solve", f"max diff to batch {diff:.1e} N"))
+    rows.append(
+        (
+            "streaming `DistributionSolver.solve`",
+            "n=8, two feet, per-foot sums",
+            f"{t * 1e6:.1f} µs/solve",
+            f"max diff to batch {diff:.1e} N",
+        )
+    )
     print(rows[-1])
     K1 = min(K, 1000)
     t = per_call(lambda i: solve_distribution_one(pts1_var[i], d1[i], fz[i], w), K1, args.repeat)
-    rows.append(("one sample `solve_distribution_one`", "n=4, any points",
-                 f"{t * 1e6:.1f} µs/solve", "batch path with T = 1"))
+    rows.append(
+        (
+            "one sample `solve_distribution_one`",
+            "n=4, any points",
+            f"{t * 1e6:.1f} µs/solve",
+            "batch path with T = 1",
+        )
+    )
     print(rows[-1])
 
     # ---------------------------------------------------------------- qpsolvers
@@ -157,8 +179,7 @@ def main() -> None:
             if solver_name not in qpsolvers.available_solvers:
                 continue
             for label, p, d, b, G, ref_name in (
-                ("n=4, fixed sole points", sole, d1, fz[:, None], np.ones((1, 4)),
-                 list(cases)[0]),
+                ("n=4, fixed sole points", sole, d1, fz[:, None], np.ones((1, 4)), list(cases)[0]),
                 ("n=8, two feet, per-foot sums", pts2, d2, b2, G2, list(cases)[2]),
             ):
                 n = p.shape[0]
@@ -175,15 +196,23 @@ def main() -> None:
                 failed = sum(r is None for r in ref)
                 ref = np.array([np.full(n, np.nan) if r is None else r for r in ref])
                 diff = np.nanmax(np.abs(ref - sols[ref_name].forces[:K]))
-                rows.append((f"qpsolvers + {solver_name}", label, f"{t * 1e6:.1f} µs/solve",
-                             f"max diff to grfguard {diff:.1e} N; {failed} of {K} failed"))
+                rows.append(
+                    (
+                        f"qpsolvers + {solver_name}",
+                        label,
+                        f"{t * 1e6:.1f} µs/solve",
+                        f"max diff to grfguard {diff:.1e} N; {failed} of {K} failed",
+                    )
+                )
                 print(rows[-1])
 
     load = os.getloadavg()
     share = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
-    env = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-           f"load average {load[0]:.1f}, this process got {share:.0%} of a CPU over the run, "
-           f"numpy {np.__version__}")
+    env = (
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"load average {load[0]:.1f}, this process got {share:.0%} of a CPU over the run, "
+        f"numpy {np.__version__}"
+    )
     table = ["| solver | problem | time | notes |", "|---|---|---|---|"]
     table += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
     text = "\n".join(

@@ -39,9 +39,7 @@ def _reference(points: np.ndarray, d: np.ndarray, b: np.ndarray, w: float, G: np
     n = points.shape[0]
     P = 2.0 * (points @ points.T + w * np.eye(n))
     q = -2.0 * points @ d
-    return qpsolvers.solve_qp(
-        P, q, A=G, b=np.maximum(b, 0.0), lb=np.zeros(n), solver="quadprog"
-    )
+    return qpsolvers.solve_qp(P, q, A=G, b=np.maximum(b, 0.0), lb=np.zeros(n), solver="quadprog")
 
 
 def _random_problems(rng: np.random.Generator, T: int, n: int, g: int, fixed: bool):
@@ -97,10 +95,7 @@ def cross_check_results():
             pts, d, b = _random_problems(rng, per_w, n, g, fixed)
             sol = solve_distribution_batch(pts, d, b, w, G)
             ref = np.array(
-                [
-                    _reference(pts if fixed else pts[t], d[t], b[t], w, G)
-                    for t in range(per_w)
-                ]
+                [_reference(pts if fixed else pts[t], d[t], b[t], w, G) for t in range(per_w)]
             )
             out.append((n, g, fixed, w, pts, d, b, G, sol, ref))
     return out
@@ -147,7 +142,9 @@ def _exact_on_free_set(points, d, b, w, G, free):
         lam[r] = z[len(idx) + c]
     cn = [sum(p[i][k] * N[i] for i in range(n)) - dd[k] for k in range(2)]
     mu = [
-        p[i][0] * cn[0] + p[i][1] * cn[1] + Fr(w) * N[i]
+        p[i][0] * cn[0]
+        + p[i][1] * cn[1]
+        + Fr(w) * N[i]
         - sum(Fr(float(G[r, i])) * lam[r] for r in range(g))
         for i in range(n)
     ]
@@ -269,8 +266,9 @@ def test_solve_one_degenerate():
     G = two_feet_equality()
     pts = np.concatenate([SOLE, SOLE + [0.0, 0.2]])
     zero = np.r_[np.zeros(4, bool), np.ones(4, bool)]
-    assert np.all(np.isnan(solve_distribution_one(pts, [0.0, 0.0], [100.0, 100.0], G=G,
-                                                  zero_mask=zero)))
+    assert np.all(
+        np.isnan(solve_distribution_one(pts, [0.0, 0.0], [100.0, 100.0], G=G, zero_mask=zero))
+    )
     out = solve_distribution_one(pts, [0.0, 0.0], [100.0, 0.0], G=G, zero_mask=zero)
     assert out[:4].sum() == pytest.approx(100.0) and np.all(out[4:] == 0.0)
 

@@ -442,8 +442,14 @@ class _MapCache:
             free, kept = _decode(np.array([code], dtype=np.int64), n, g)
             eye = np.eye(k, dtype=np.longdouble)
             N, lam, mu, _ = _evaluate(
-                self.X, self.Y, self.w, self.G, np.repeat(free, k, axis=0),
-                np.repeat(kept, k, axis=0), eye[:, :2], eye[:, 2:],
+                self.X,
+                self.Y,
+                self.w,
+                self.G,
+                np.repeat(free, k, axis=0),
+                np.repeat(kept, k, axis=0),
+                eye[:, :2],
+                eye[:, 2:],
             )
             B = np.concatenate([N, lam, mu], axis=1).T.astype(float)  # (2n + g, k)
             self.cache[code] = B
@@ -502,9 +508,7 @@ class _Block:
         """
         if self.maps is None:
             X, Y = self.take(sel)
-            return _evaluate(
-                X, Y, self.w, self.G, free, self.kept[sel], self.d[sel], self.b[sel]
-            )
+            return _evaluate(X, Y, self.w, self.G, free, self.kept[sel], self.d[sel], self.b[sel])
         n, g = self.G.shape[1], self.G.shape[0]
         m = sel.size
         x = np.concatenate([self.d[sel], self.b[sel]], axis=1)
@@ -634,8 +638,14 @@ def _solve_block(blk: _Block) -> tuple[np.ndarray, ...]:
         ld = np.longdouble
         X, Y = blk.take(pi)
         Nl, ll, ml, _ = _evaluate(
-            X.astype(ld), Y.astype(ld), blk.w.astype(ld), G.astype(ld), free[pi], kept[pi],
-            blk.d[pi].astype(ld), blk.b[pi].astype(ld),
+            X.astype(ld),
+            Y.astype(ld),
+            blk.w.astype(ld),
+            G.astype(ld),
+            free[pi],
+            kept[pi],
+            blk.d[pi].astype(ld),
+            blk.b[pi].astype(ld),
         )
         N[pi] = np.where(free[pi], np.maximum(Nl, 0.0), 0.0).astype(float)
         lam[pi] = ll.astype(float)
@@ -705,8 +715,13 @@ class _RegionTable:
     """
 
     def __init__(
-        self, X: np.ndarray, Y: np.ndarray, w: np.ndarray, G: np.ndarray,
-        held: np.ndarray, kept: np.ndarray,
+        self,
+        X: np.ndarray,
+        Y: np.ndarray,
+        w: np.ndarray,
+        G: np.ndarray,
+        held: np.ndarray,
+        kept: np.ndarray,
     ) -> None:
         n, g = G.shape[1], G.shape[0]
         sup = G > 0.0
@@ -721,8 +736,13 @@ class _RegionTable:
         eye = np.eye(k, dtype=ld)
         fr = np.repeat(self.free, k, axis=0)
         Nm, lm, mm, _ = _evaluate(
-            X.astype(ld), Y.astype(ld), w.astype(ld), G.astype(ld), fr,
-            np.broadcast_to(kept, (R * k, g)), np.tile(eye[:, :2], (R, 1)),
+            X.astype(ld),
+            Y.astype(ld),
+            w.astype(ld),
+            G.astype(ld),
+            fr,
+            np.broadcast_to(kept, (R * k, g)),
+            np.tile(eye[:, :2], (R, 1)),
             np.tile(eye[:, 2:], (R, 1)),
         )
         Nm = Nm.reshape(R, k, n).transpose(0, 2, 1).astype(float)  # (R, n, k)
@@ -755,9 +775,18 @@ class _RegionTable:
 
 def _solve_tables(
     tables: dict[int, _RegionTable],
-    pts: np.ndarray, w: np.ndarray, G: np.ndarray,
-    d: np.ndarray, b: np.ndarray, held: np.ndarray, kept: np.ndarray, good: np.ndarray,
-    forces: np.ndarray, lam: np.ndarray, mu: np.ndarray, active: np.ndarray,
+    pts: np.ndarray,
+    w: np.ndarray,
+    G: np.ndarray,
+    d: np.ndarray,
+    b: np.ndarray,
+    held: np.ndarray,
+    kept: np.ndarray,
+    good: np.ndarray,
+    forces: np.ndarray,
+    lam: np.ndarray,
+    mu: np.ndarray,
+    active: np.ndarray,
 ) -> None:
     """Fixed points, table path, whole log at once; writes into the output arrays.
 
@@ -1283,8 +1312,13 @@ class DistributionSolver:
 
 
 def _evaluate_one(
-    px: list[float], py: list[float], w: list[float], Gl: list[list[float]],
-    free: list[bool], kept: list[bool], x: tuple[float, ...],
+    px: list[float],
+    py: list[float],
+    w: list[float],
+    Gl: list[list[float]],
+    free: list[bool],
+    kept: list[bool],
+    x: tuple[float, ...],
 ) -> tuple[list[float], list[float], list[float]]:
     """:func:`_evaluate` for one sample in plain Python floats: N, λ, μ."""
     n, g = len(px), len(Gl)
@@ -1426,10 +1460,13 @@ def solve_distribution_one(
         if not (bad_n or bad_mu):
             found = free
             break
-        free = repair([
-            not forced[i] and ((free[i] and N[i] > 0.0) or (not free[i] and mu[i] < -_TOL * smu))
-            for i in range(n)
-        ])
+        free = repair(
+            [
+                not forced[i]
+                and ((free[i] and N[i] > 0.0) or (not free[i] and mu[i] < -_TOL * smu))
+                for i in range(n)
+            ]
+        )
     if found is None:  # phase 2: primal active set from a feasible start
         free = [not forced[i] and grouped[i] for i in range(n)]
         Ncur = [0.0] * n
@@ -1469,8 +1506,13 @@ def solve_distribution_one(
         return sol.forces[0]
     ld = np.longdouble
     Nl, _, _, _ = _evaluate(
-        pts[None, :, 0].astype(ld), pts[None, :, 1].astype(ld), w_arr.astype(ld),
-        g_mat.astype(ld), np.array([found]), np.array([kept]),
-        np.array([dl], dtype=ld), np.array([bc], dtype=ld),
+        pts[None, :, 0].astype(ld),
+        pts[None, :, 1].astype(ld),
+        w_arr.astype(ld),
+        g_mat.astype(ld),
+        np.array([found]),
+        np.array([kept]),
+        np.array([dl], dtype=ld),
+        np.array([bc], dtype=ld),
     )
     return np.where(found, np.maximum(Nl[0], 0.0), 0.0).astype(float)
