@@ -52,25 +52,27 @@ def walking_like(rng: np.random.Generator, T: int, sole: np.ndarray):
     return fz, cop
 
 
-def best_of(fn, repeat: int) -> float:
-    """Smallest wall time of ``repeat`` calls [s]."""
-    best = np.inf
+def best_of(fn, repeat: int) -> tuple[float, float]:
+    """Smallest wall time and smallest process CPU time of ``repeat`` calls [s]."""
+    best, best_cpu = np.inf, np.inf
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
         best = min(best, time.perf_counter() - t0)
-    return best
+        best_cpu = min(best_cpu, time.process_time() - c0)
+    return best, best_cpu
 
 
-def per_call(fn, calls: int, repeat: int) -> float:
-    """Median over ``repeat`` rounds of the mean time per call over ``calls`` calls [s]."""
-    times = []
+def per_call(fn, calls: int, repeat: int) -> tuple[float, float]:
+    """Median over ``repeat`` rounds of the mean wall and CPU time per call [s]."""
+    times, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for i in range(calls):
             fn(i)
         times.append((time.perf_counter() - t0) / calls)
-    return float(np.median(times))
+        cpu.append((time.process_time() - c0) / calls)
+    return float(np.median(times)), float(np.median(cpu))
 
 
 def main() -> None:
@@ -114,14 +116,16 @@ def main() -> None:
     }
     sols = {}
     for name, (p, d, b, G) in cases.items():
-        t = best_of(lambda p=p, d=d, b=b, G=G: solve_distribution_batch(p, d, b, w, G), args.repeat)
+        t, c = best_of(
+            lambda p=p, d=d, b=b, G=G: solve_distribution_batch(p, d, b, w, G), args.repeat
+        )
         sols[name] = solve_distribution_batch(p, d, b, w, G)
         fb = int(np.sum(sols[name].iterations == -1))
         rows.append(
             (
                 "batch `solve_distribution_batch`",
                 name,
-                f"{t / T * 1e9:.0f} ns/sample",
+                f"{t / T * 1e9:.0f} / {c / T * 1e9:.0f} ns/sample",
                 f"{T:.0e} samples, best of {args.repeat}; {fb} enumeration fallbacks",
             )
         )
@@ -131,40 +135,40 @@ def main() -> None:
     K = min(args.calls, T)
     solver4 = DistributionSolver(sole, w)
     r4 = [(float(d1[i, 0]), float(d1[i, 1]), float(fz[i])) for i in range(K)]
-    t = per_call(lambda i: solver4.solve(*r4[i]), K, args.repeat)
+    t, c = per_call(lambda i: solver4.solve(*r4[i]), K, args.repeat)
     stream4 = np.array([solver4.solve(*r4[i]) for i in range(K)])
     diff = np.abs(stream4 - sols[list(cases)[0]].forces[:K]).max()
     rows.append(
         (
             "streaming `DistributionSolver.solve`",
             "n=4, fixed sole points",
-            f"{t * 1e6:.1f} µs/solve",
+            f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve",
             f"max diff to batch {diff:.1e} N",
         )
     )
     print(rows[-1])
     solver8 = DistributionSolver(pts2, w, G2)
     r8 = [(float(d2[i, 0]), float(d2[i, 1]), (float(b2[i, 0]), float(b2[i, 1]))) for i in range(K)]
-    t = per_call(lambda i: solver8.solve(*r8[i]), K, args.repeat)
+    t, c = per_call(lambda i: solver8.solve(*r8[i]), K, args.repeat)
     stream8 = np.array([solver8.solve(*r8[i]) for i in range(K)])
     diff = np.abs(stream8 - sols[list(cases)[2]].forces[:K]).max()
     rows.append(
         (
             "streaming `DistributionSolver.solve`",
             "n=8, two feet, per-foot sums",
-            f"{t * 1e6:.1f} µs/solve",
+            f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve",
             f"max diff to batch {diff:.1e} N",
         )
     )
     print(rows[-1])
     K1 = min(K, 1000)
-    t = per_call(lambda i: solve_distribution_one(pts1_var[i], d1[i], fz[i], w), K1, args.repeat)
+    t, c = per_call(lambda i: solve_distribution_one(pts1_var[i], d1[i], fz[i], w), K1, args.repeat)
     rows.append(
         (
             "one sample `solve_distribution_one`",
             "n=4, any points",
-            f"{t * 1e6:.1f} µs/solve",
-            "batch path with T = 1",
+            f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve",
+            "active set in plain floats, final solve in longdouble",
         )
     )
     print(rows[-1])
@@ -191,7 +195,7 @@ def main() -> None:
                         P, -2.0 * p @ d[i], A=G, b=np.maximum(b[i], 0.0), lb=lb, solver=s
                     )
 
-                t = per_call(call, K, args.repeat)
+                t, c = per_call(call, K, args.repeat)
                 ref = [call(i) for i in range(K)]
                 failed = sum(r is None for r in ref)
                 ref = np.array([np.full(n, np.nan) if r is None else r for r in ref])
@@ -200,7 +204,7 @@ def main() -> None:
                     (
                         f"qpsolvers + {solver_name}",
                         label,
-                        f"{t * 1e6:.1f} µs/solve",
+                        f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve",
                         f"max diff to grfguard {diff:.1e} N; {failed} of {K} failed",
                     )
                 )
@@ -213,7 +217,7 @@ def main() -> None:
         f"load average {load[0]:.1f}, this process got {share:.0%} of a CPU over the run, "
         f"numpy {np.__version__}"
     )
-    table = ["| solver | problem | time | notes |", "|---|---|---|---|"]
+    table = ["| solver | problem | time (wall / CPU) | notes |", "|---|---|---|---|"]
     table += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
     text = "\n".join(
         [

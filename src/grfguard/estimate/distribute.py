@@ -814,7 +814,10 @@ def _solve_tables(
         R = tab.R
         if tab.full_needs_mu or R == 1:
             rest = np.arange(sel.size) if R > 1 else np.zeros(0, dtype=np.int64)
-            if R == 1:
+            if R == 1 and not tab.free[0].any() and not tab.checkable.any():
+                # nothing loaded (zero load or all points masked): all forces zero
+                forces[sel], lam[sel], mu[sel], active[sel] = 0.0, 0.0, 0.0, True
+            elif R == 1:
                 c = np.zeros(sel.size, dtype=np.int64)
                 N_, lam_, mu_, free_ = tab._finish(x, c)
                 forces[sel], lam[sel], mu[sel], active[sel] = N_, lam_, mu_, ~free_
