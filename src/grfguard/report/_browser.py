@@ -133,10 +133,15 @@ class ChromiumSession:
         self._next_id = 0
         self.events: list[dict[str, Any]] = []
         self.width, self.height = width, height
-        target = self.call("Target.createTarget", {"url": "about:blank"})["targetId"]
-        self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True})[
-            "sessionId"
-        ]
+        self.session: str | None = None
+        try:
+            target = self.call("Target.createTarget", {"url": "about:blank"})["targetId"]
+            self.session = self.call(
+                "Target.attachToTarget", {"targetId": target, "flatten": True}
+            )["sessionId"]
+        except BaseException:
+            self.close()  # never leave our browser process behind
+            raise
 
     # -- protocol --------------------------------------------------------------------
     def _read_message(self, timeout_s: float) -> dict[str, Any]:
@@ -161,7 +166,7 @@ class ChromiumSession:
         """Send one command; return its id."""
         self._next_id += 1
         msg: dict[str, Any] = {"id": self._next_id, "method": method, "params": params or {}}
-        if session and getattr(self, "session", None):
+        if session and self.session:
             msg["sessionId"] = self.session
         self._w.write(json.dumps(msg).encode() + b"\0")
         return self._next_id
