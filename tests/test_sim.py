@@ -92,6 +92,7 @@ def test_planned_contact_matches_truth(walk, request):
             df[f"contact_ref_{'l' if s == 'r' else 'r'}"] == 0
         )
         assert np.all(_foot_force(df, s)[stance_single.to_numpy()] > 0.2 * _weight(df))
+        np.testing.assert_array_equal(df[f"true_contact_{s}"], _foot_force(df, s) > 0)
 
 
 def test_true_zmp_follows_reference(default_walk):

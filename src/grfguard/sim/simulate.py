@@ -51,6 +51,7 @@ EXTRA_TRUE_COLUMNS = (
     *(f"true_cop_{s}_{a}" for s in SIDES for a in "xy"),
     *(f"true_sole_{s}_{a}" for s in SIDES for a in "xyz"),
     *(f"true_sole_{s}_yaw" for s in SIDES),
+    *(f"true_contact_{s}" for s in SIDES),
     "true_trunk_tilt",
 )
 _CHUNK = 1000  # physics steps per rollout call (1 s)
@@ -231,7 +232,8 @@ def simulate(
         ``true_com_x/y/z`` [m], ``true_zmp_x/y`` [m] (CoP of all corner forces),
         ``true_base_x/y/z`` [m], ``true_base_quat_w/x/y/z``, plus
         :data:`EXTRA_TRUE_COLUMNS` (CoM velocity [m/s], per-foot CoP [m, NaN when the
-        foot carries < 1 N], sole positions [m] and yaw [rad], trunk tilt [deg]).
+        foot carries < 1 N], sole positions [m] and yaw [rad], actual contact of each
+        foot (0/1, any corner force > 0), trunk tilt [deg]).
         ``df.attrs`` holds ``robot``, ``gait`` (resolved), ``noise``, ``seed``,
         ``sample_rate``, ``grfguard_version``, ``scenario``, ``n_steps``,
         ``step_times``.
@@ -377,5 +379,9 @@ def _log_columns(
             cols[f"true_sole_{s}_{a}"] = sp[:, i].copy()
     for s in SIDES:
         cols[f"true_sole_{s}_yaw"] = _yaw(phys[f"truth_sole_{s}_quat"])
+    for si, s in enumerate(SIDES):
+        cols[f"true_contact_{s}"] = (f_all[:, 4 * si : 4 * si + 4].sum(axis=1) > 0.0).astype(
+            np.int64
+        )
     cols["true_trunk_tilt"] = _tilt_deg(bq)
     return cols
