@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from grfguard.estimate.distribute import (
+    DistributionSolver,
     solve_distribution_batch,
     solve_distribution_one,
 )
@@ -45,6 +46,7 @@ __all__ = [
     "paper_cop_literal",
     "world_to_foot_xy",
     "split_paper_feet",
+    "split_paper_feet_one",
 ]
 
 
@@ -207,3 +209,27 @@ def split_paper_feet(
         d = np.maximum(fz, 0.0)[:, None] * cop[:, i]
         out.append(solve_distribution_batch(points_F, d, fz, weight).forces)
     return np.concatenate(out, axis=1)
+
+
+def split_paper_feet_one(
+    cop_F: np.ndarray, foot_force_n: np.ndarray, points_F: np.ndarray, solver: DistributionSolver
+) -> np.ndarray:
+    """One sample of :func:`split_paper_feet` with a cached per-foot solver.
+
+    Args:
+        cop_F: (2, 2) CoP of (right, left) in each sole frame [m].
+        foot_force_n: (2,) vertical force of each foot [N].
+        points_F: (4, 2) sensor positions in the sole frame [m].
+        solver: ``DistributionSolver(points_F, weight)``.
+
+    Returns:
+        (8,) corner forces [N].
+    """
+    lo, hi = points_F.min(axis=0), points_F.max(axis=0)
+    cop = np.clip(cop_F, lo, hi)
+    out = np.empty(8)
+    for i in range(2):
+        fz = float(foot_force_n[i])
+        fp = max(fz, 0.0)
+        out[4 * i : 4 * i + 4] = solver.solve(fp * float(cop[i, 0]), fp * float(cop[i, 1]), fz)
+    return out
