@@ -111,3 +111,26 @@ def test_network_is_really_cut(tmp_path: Path) -> None:
     )
     rep = load_report(page, timeout_s=30.0, chromium=CHROMIUM)
     assert any("example.com" in u for u in rep.blocked_requests)
+
+
+def test_time_axes_are_linked(tmp_path: Path) -> None:
+    """Zooming one figure's time axis zooms every figure (checked in the live page)."""
+    from grfguard.report._browser import ChromiumSession
+
+    html = write_html_report(synthetic_run(duration_s=6.0, seed=6), tmp_path / "link.html")
+    with ChromiumSession(_require_chromium()) as cr:
+        cr.call("Page.enable")
+        cr.call("Page.navigate", {"url": html.resolve().as_uri()})
+        for _ in range(600):
+            if cr.evaluate("!!(window.grfguardReport && window.grfguardReport.ready)"):
+                break
+            cr.pump(0.05)
+        ranges = cr.evaluate(
+            "Plotly.relayout('fig-0-r1', {'xaxis.range': [2, 3]}).then(() =>"
+            " new Promise(r => setTimeout(r, 300))).then(() =>"
+            " Array.from(document.querySelectorAll('div.fig')).map("
+            "d => d._fullLayout.xaxis.range))"
+        )
+    assert len(ranges) == 10
+    for r in ranges:
+        assert r == pytest.approx([2.0, 3.0])

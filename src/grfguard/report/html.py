@@ -16,7 +16,9 @@ each bucket's min and max (peaks survive), with full resolution within
 ``focus_s`` [s] of every fault and alarm onset; 0/1 signals are stored exactly as
 change points. A 10-minute 1 kHz log gives a ~10 MB file (see BENCHMARKS.md).
 
-When the page has drawn every figure it sets ``window.grfguardReport.ready = true``
+The time axes of all figures are linked (zoom or pan one, all follow). Figures are
+drawn one per browser task so the table and the first figures show while the rest
+draw; when every figure is drawn the page sets ``window.grfguardReport.ready = true``
 (browser tests and benchmarks wait on it).
 """
 
@@ -612,7 +614,31 @@ _JS = """
       return nextTask();
     }).catch(function (err) { status.errors.push(String(err)); });
   });
+  // Linked time axes: zooming or panning one figure's time axis moves all the others.
+  var syncing = false;
+  function linkTimeAxes() {
+    var divs = specs.map(function (sp) { return document.getElementById(sp.id); });
+    divs.forEach(function (gd) {
+      gd.on('plotly_relayout', function (ev) {
+        if (syncing) { return; }
+        var upd = null;
+        if (ev['xaxis.range[0]'] !== undefined) {
+          upd = {'xaxis.range': [ev['xaxis.range[0]'], ev['xaxis.range[1]']]};
+        } else if (ev['xaxis.range'] !== undefined) {
+          upd = {'xaxis.range': ev['xaxis.range']};
+        } else if (ev['xaxis.autorange']) {
+          upd = {'xaxis.autorange': true};
+        }
+        if (!upd) { return; }
+        syncing = true;
+        Promise.all(divs.filter(function (o) { return o !== gd; }).map(function (o) {
+          return Plotly.relayout(o, upd);
+        })).then(function () { syncing = false; }, function () { syncing = false; });
+      });
+    });
+  }
   chain.then(function () {
+    linkTimeAxes();
     status.renderMs = performance.now() - t0;
     status.readyAtMs = performance.now();  // since navigation start (timeOrigin)
     status.ready = true;
@@ -689,7 +715,7 @@ def build_html_report(
         "sensor's foot; shaded red: injected fault; red dashed lines: alarm onsets. Traces are "
         f"decimated for display ({max_points} min/max buckets, peaks kept; full resolution within "
         f"{focus_s:g} s of fault and alarm onsets). Click legend entries to hide traces, drag "
-        "to zoom, double-click to reset.</p>"
+        "to zoom (all figures follow the time axis), double-click to reset.</p>"
         + figs
         + "<script type='application/json' id='grfguard-data'>" + payload + "</script>"
         + f"<script>{_JS}</script></main></body></html>"
