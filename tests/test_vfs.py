@@ -103,15 +103,14 @@ def _lean(theta: float) -> np.ndarray:
 def test_static_double_support_exact_corner_forces() -> None:
     weight = SURALP.mass * SURALP.gravity
     out = VirtualForceSensor(SURALP).run(_static_log(np.zeros(12), (1, 1)))
-    np.testing.assert_allclose(out.iloc[-1][[f"vfs_{s}" for s in "r1 r2 r3 r4 l1 l2 l3 l4".split()]],
-                               weight / 8, atol=1e-6)
+    corners = [f"vfs_{s}" for s in "r1 r2 r3 r4 l1 l2 l3 l4".split()]
+    np.testing.assert_allclose(out.iloc[-1][corners], weight / 8, atol=1e-6)
     q = _lean(0.05)
     com, corners = _model_com_and_corners(q)
     assert abs(com[1] - corners[:, 1].mean()) > 0.02  # the lean moved the CoM sideways
     expected = _min_norm(corners[:, :2], com[:2], weight)
     out = VirtualForceSensor(SURALP).run(_static_log(q, (1, 1)))
-    got = out.iloc[-1][[c for c in VFS_OUTPUT_COLUMNS if c[4:6] in ("r1", "r2", "r3", "r4",
-                                                                    "l1", "l2", "l3", "l4")]]
+    got = out.iloc[-1][corners]
     np.testing.assert_allclose(got.to_numpy(float), expected, atol=1e-3)
     assert out.iloc[-1]["vfs_total_r"] > out.iloc[-1]["vfs_total_l"] + 100
 
@@ -247,3 +246,38 @@ def test_accuracy_other_walks(walk: str, request: pytest.FixtureRequest) -> None
 def test_accuracy_long_double_support() -> None:
     log = simulate(SURALP, GaitConfig(double_support=0.4, duration=20.0), NoiseConfig(), 0)
     _check_targets(_evaluate(log), ds_corner=DS_CORNER_LONG)
+
+
+# ----------------------------------------------------------------------------- metrics
+
+
+def test_evaluate_vfs_windows_and_bias() -> None:
+    """Synthetic truth: 1 s right stance, 0.2 s double support, 1 s left stance."""
+    n = 2200
+    t = np.arange(n) * 1e-3
+    true = np.zeros((n, 8))
+    true[:1200, :4] = 200.0
+    true[1000:, 4:] = 150.0
+    est = true.copy()
+    est[:, 0] += 10.0  # r1 reads 10 N high everywhere
+    cols = {TIME: t}
+    for j, s in enumerate("r1 r2 r3 r4 l1 l2 l3 l4".split()):
+        cols[f"true_force_{s}"] = true[:, j]
+        cols[f"vfs_{s}"] = est[:, j]
+    r = evaluate_vfs(pd.DataFrame(cols), t_start_s=0.0)
+    ss, ds = r["ss"], r["ds"]
+    # contact changes at samples 1000 and 1200; SS keeps 50 samples away, DS 10:
+    # SS right [0, 950), SS left [1251, 2200), DS [1011, 1189]
+    assert ss["per_sensor"]["r1"]["n"] == 950
+    assert ss["per_sensor"]["l1"]["n"] == 2200 - 1251
+    assert ds["n_samples"] == 1189 - 1011 + 1
+    assert ss["per_sensor"]["r1"]["bias"] == pytest.approx(10.0)
+    assert ss["per_sensor"]["r1"]["rmse"] == pytest.approx(10.0)
+    assert ss["per_sensor"]["r2"]["rmse"] == pytest.approx(0.0)
+    assert ss["bias_worst"] == pytest.approx(10.0) and ds["bias_worst"] == pytest.approx(10.0)
+    assert ss["foot_rmse"] == pytest.approx(np.sqrt(100 * 950 / (950 + 949)))
+    import json
+
+    json.dumps(r)  # JSON-able
+    with pytest.raises(LogFormatError, match="vfs_r1"):
+        evaluate_vfs(pd.DataFrame({TIME: t}))
