@@ -103,14 +103,14 @@ def _lean(theta: float) -> np.ndarray:
 def test_static_double_support_exact_corner_forces() -> None:
     weight = SURALP.mass * SURALP.gravity
     out = VirtualForceSensor(SURALP).run(_static_log(np.zeros(12), (1, 1)))
-    corners = [f"vfs_{s}" for s in "r1 r2 r3 r4 l1 l2 l3 l4".split()]
-    np.testing.assert_allclose(out.iloc[-1][corners], weight / 8, atol=1e-6)
+    cols = [f"vfs_{s}" for s in "r1 r2 r3 r4 l1 l2 l3 l4".split()]
+    np.testing.assert_allclose(out.iloc[-1][cols], weight / 8, atol=1e-6)
     q = _lean(0.05)
     com, corners = _model_com_and_corners(q)
     assert abs(com[1] - corners[:, 1].mean()) > 0.02  # the lean moved the CoM sideways
     expected = _min_norm(corners[:, :2], com[:2], weight)
     out = VirtualForceSensor(SURALP).run(_static_log(q, (1, 1)))
-    got = out.iloc[-1][corners]
+    got = out.iloc[-1][cols]
     np.testing.assert_allclose(got.to_numpy(float), expected, atol=1e-3)
     assert out.iloc[-1]["vfs_total_r"] > out.iloc[-1]["vfs_total_l"] + 100
 
