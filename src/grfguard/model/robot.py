@@ -112,7 +112,8 @@ class RobotConfig:
     sensor_inset: float = 0.01
     #: Radius of the collision sphere at each sensor in [m] (DESIGN.md: ~5 mm).
     contact_radius: float = 0.005
-    #: Joint armature in [kg m^2] (DESIGN.md: 0.3 for a 114 kg robot; scaled by mass).
+    #: Joint armature in [kg m^2] for a SURALP-sized robot (DESIGN.md: 0.3); the MJCF
+    #: scales it by m L^2 relative to SURALP (hip-to-sole length L).
     armature: float = 0.3
     #: Extra keys kept verbatim (for forward compatibility of TOML files).
     extra: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
