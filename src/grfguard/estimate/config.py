@@ -110,6 +110,9 @@ class VFSConfig:
     paper_measurement_noise: float = 0.05**2
     #: Time constant of the ZMP disturbance observer in [s] (paper eq. 4-5).
     paper_dob_time_constant: float = 0.5
+    #: Gain from the low-passed ZMP error ``p_ref - p_act`` to the CoM correction
+    #: ``Delta c`` (paper eq. 4-5); 0 switches the disturbance observer off.
+    paper_dob_gain: float = 1.0
     #: ``c_y,max`` of eq. 7 in [m]: lateral CoM excursion that puts all load on one foot;
     #: 0 means "half the distance between the feet from the model".
     paper_cy_max: float = 0.0
@@ -151,6 +154,7 @@ class VFSConfig:
         _num("paper_process_noise", self.paper_process_noise, 1e-12, 1e12, "m^2/s^5")
         _num("paper_measurement_noise", self.paper_measurement_noise, 1e-12, 1e6, "(m/s^2)^2")
         _num("paper_dob_time_constant", self.paper_dob_time_constant, 1e-3, 1e3, "s")
+        _num("paper_dob_gain", self.paper_dob_gain, -10.0, 10.0, "")
         _num("paper_cy_max", self.paper_cy_max, 0.0, 2.0, "m")
 
     # ------------------------------------------------------------------ presets

@@ -369,6 +369,7 @@ class VirtualForceSensor:
             self._paper = PaperCoMFilter(
                 c.dt, zc, self.g, c.paper_process_noise, c.paper_measurement_noise,
                 dob_time_constant_s=c.paper_dob_time_constant,
+                dob_gain=c.paper_dob_gain,
             )
         return self._paper
 
