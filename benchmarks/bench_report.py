@@ -86,7 +86,7 @@ def main() -> int:
                 page_ready.append(rep.state["readyAtMs"] / 1e3)
                 first.append(rep.state["firstFigureAtMs"] / 1e3)
             t0 = time.perf_counter()
-            pngs = write_png_figures(df, Path(tmp) / f"png_{dur:g}", dpi=150)
+            pngs = write_png_figures(df, Path(tmp) / f"png_{dur:g}", dpi=150)  # 4 + 2 + 5
             png_s = time.perf_counter() - t0
             row = {
                 "dur": dur, "rows": len(df), "build_s": build_s, "size_mb": size_mb,
@@ -122,7 +122,8 @@ no network; median of {args.repeats} cold browser starts).
 {chr(10).join(table)}
 
 - The file is one HTML page: plotly.js ({plotly_mb:.1f} MB) inlined once, figure data as
-  base64 float32 arrays, 8 figures (one per sensor, 8 traces each).
+  base64 float32 arrays, 10 figures (detection timeline, force per foot, one per sensor
+  with 8 traces each), time axes linked.
 - Each trace keeps the min and max of 2000 buckets (peaks survive) plus every sample
   within 1.5 s of a fault or alarm onset; 0/1 signals (flags, stance) are exact change
   points. So size and drawing time hardly grow with the log length: the budget
