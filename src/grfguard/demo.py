@@ -81,8 +81,14 @@ def run_demo(
     (out_dir / "metrics.json").write_text(json.dumps(results, indent=2, default=_json_default))
     table_md = _metrics_markdown(results)
     (out_dir / "metrics.md").write_text(table_md)
-    pngs = write_png_figures(runs["default"], out_dir / "figures")
-    pngs += write_png_figures(runs["paper"], out_dir / "figures_paper")
+    pngs = write_png_figures(
+        runs["default"], out_dir / "figures",
+        metrics=results["default"].get("detection", {}).get("sensors"),
+    )
+    pngs += write_png_figures(
+        runs["paper"], out_dir / "figures_paper",
+        metrics=results["paper"].get("detection", {}).get("sensors"),
+    )
 
     console.print("[bold]5/5[/] writing the HTML report")
     report = write_html_report(
