@@ -83,6 +83,8 @@ _PRIORITY = {"nan": 4, "const": 3, "swing": 2, "corner": 1, "total": 1}
 _VFS_TOTAL = tuple(f"vfs_total_{s}" for s in SIDES)
 _N = len(SENSOR_NAMES)
 _NAN = float("nan")
+#: Time constant of the low-pass that cleans a noisy sensor in the recovery [s].
+NOISE_LOWPASS_TAU_S = 0.008
 
 
 @dataclass(frozen=True)
@@ -216,7 +218,7 @@ class _Sensor:
         "prev", "run", "gp", "gn", "cp", "cn", "flag", "source", "kind", "t_flag",
         "valid_since_alarm", "eta", "const_value", "varied", "returns", "n", "st", "sx",
         "stt", "stx", "sxx", "n_out", "sgl", "sll", "delta", "hand", "last_rec", "x1", "x2",
-        "last_alarm", "sn", "sL", "sr", "sLL", "sLr", "eta_st",
+        "last_alarm", "lp", "sn", "sL", "sr", "sLL", "sLr", "srr", "eta_st",
     )
 
     def __init__(self, blend_alpha_tau: float, dt: float) -> None:
@@ -228,6 +230,7 @@ class _Sensor:
         self.hand = HandOver(blend_alpha_tau, dt)
         self.last_rec = 0.0
         self.x1 = self.x2 = _NAN
+        self.lp = _NAN
         self.clear()
 
     def clear(self) -> None:
@@ -246,7 +249,7 @@ class _Sensor:
         self.n_out = 0
         self.sgl = self.sll = 0.0
         self.sn = 0
-        self.sL = self.sr = self.sLL = self.sLr = 0.0
+        self.sL = self.sr = self.sLL = self.sLr = self.srr = 0.0
         self.eta_st = _NAN
 
     # ---- swing statistics: linear fit x = a + b (t - t_flag), outliers excluded
@@ -573,11 +576,13 @@ class Monitor:
                     self._swing_dur[f]
                 if not contact[o] and math.isfinite(self._t_lo[o]):
                     since_o = t - self._t_lo[o]
+                    # the other foot's touchdown must be predictable (heel strikes
+                    # come early): no test before one swing duration is known
                     ss_ok[f] = (
                         t - self._t_td[f] >= c.gate_touchdown_s
                         and since_o >= c.gate_liftoff_s
-                        and (not math.isfinite(exp_o)
-                             or since_o <= exp_o - c.gate_before_touchdown_s)
+                        and math.isfinite(exp_o)
+                        and since_o <= exp_o - c.gate_before_touchdown_s
                     )
         sig = th.sigma_swing_n
         # guard: two unflagged sensors of a swinging foot loaded at once = early
@@ -665,7 +670,8 @@ class Monitor:
                     if not alarms[i] and not comp:
                         alarms[i] = "corner"
                 if s.flag and s.source in ("corner", "total"):
-                    s.valid_since_alarm += 1
+                    if s.source == "corner" and abs(z) < th.corner_kappa:
+                        s.valid_since_alarm += 1
                     if infoless_foot[f] or not math.isfinite(tot[f]):
                         self._stance_stats(s, xi - v[i], v[i])
         # ---- foot-total test
@@ -673,7 +679,14 @@ class Monitor:
         res_t = [_NAN, _NAN]
         for f in range(2):
             idx = range(4 * f, 4 * f + 4)
-            infoless = any(sens[i].flag and sens[i].source in _INFOLESS_SOURCES for i in idx)
+            # the balance is only meaningful when every flagged sensor of the foot is
+            # exactly compensated (swing-sized offset/drift) or is the one under test
+            infoless = any(
+                sens[i].flag
+                and not (sens[i].source == "swing" and sens[i].kind in _ADDITIVE)
+                and sens[i].source not in ("total", "corner")
+                for i in idx
+            )
             if not (ss_ok[f] and math.isfinite(tot[f]) and math.isfinite(weight)
                     and weight > 0) or infoless:
                 continue
@@ -695,6 +708,14 @@ class Monitor:
             self._tn[f] = gn if gn > 0.0 else 0.0
             stat_t[f] = max(self._tp[f], self._tn[f])
             sgn = 1.0 if z > 0 else -1.0
+            # health evidence for stance-flagged sensors of this foot: a quiet residual
+            for i in idx:
+                s = sens[i]
+                if s.flag and s.source in ("total", "corner"):
+                    if abs(z) < th.total_kappa:
+                        s.valid_since_alarm += 1
+                    else:
+                        s.valid_since_alarm = 0
             if abs(z) > th.total_kappa:
                 for j, i in enumerate(idx):
                     if math.isfinite(v[i]):
@@ -777,6 +798,7 @@ class Monitor:
         s.sr += r
         s.sLL += load * load
         s.sLr += load * r
+        s.srr += r * r
         s.eta_st = r if math.isnan(s.eta_st) else s.eta_st + (r - s.eta_st) * 0.02
 
     @staticmethod
@@ -854,17 +876,17 @@ class Monitor:
                 s.kind = "offset"
                 s.eta = s.sx / s.n
             return
-        # stance-only evidence: fit residual = a + g * load
+        # stance-only evidence: residual = constant (offset) or proportional to the
+        # load (gain), whichever fits better
         if s.sn >= 50:
             n = s.sn
-            mL = s.sL / n
-            cLL = s.sLL - n * mL * mL
-            g = (s.sLr - n * mL * (s.sr / n)) / cLL if cLL > 1e-9 else 0.0
-            a = s.sr / n - g * mL
-            if abs(g) > 0.08 and abs(a) < 0.3 * abs(g) * abs(mL):
+            sse_const = s.srr - s.sr * s.sr / n
+            g0 = s.sLr / s.sLL if s.sLL > 0 else 0.0
+            sse_gain = s.srr - g0 * s.sLr
+            if abs(g0) > 0.05 and sse_gain < sse_const and 1.0 + g0 > 0.05:
                 s.kind = "gain"
                 s.eta = _NAN
-                s.sgl, s.sll = 1.0 + g, 1.0  # gain estimate for the recovery
+                s.sgl, s.sll = 1.0 + g0, 1.0  # gain estimate for the recovery
                 return
             s.kind = "offset"
             s.eta = s.eta_st
@@ -884,18 +906,22 @@ class Monitor:
     ) -> None:
         c = self.config
         dt = c.dt_s
-        a_track = min(1.0, dt / 0.02)
-        a_decay = min(1.0, dt / 0.03)
+        a_fast = min(1.0, dt / 0.005)
         sens = self._sensors
         corrected = [_NAN] * _N
         info = [True] * _N
+        a_lp = min(1.0, dt / NOISE_LOWPASS_TAU_S)
         for i in range(_N):
             s = sens[i]
             xi = x[i]
+            if math.isfinite(xi):
+                s.lp = xi if math.isnan(s.lp) else s.lp + (xi - s.lp) * a_lp
             if s.flag and s.kind in _ADDITIVE and math.isfinite(s.eta):
                 corrected[i] = xi - s.eta
             elif s.flag and s.kind == "gain" and s.sll > 0 and s.sgl / s.sll > 0.05:
                 corrected[i] = xi / (s.sgl / s.sll)
+            elif s.flag and s.kind == "noise" and math.isfinite(s.lp):
+                corrected[i] = s.lp
             elif s.flag and s.kind == "spikes":
                 trip = [q for q in (xi, s.x1, s.x2) if math.isfinite(q)]
                 corrected[i] = sorted(trip)[len(trip) // 2] if trip else _NAN
@@ -908,34 +934,32 @@ class Monitor:
                     xi != s.const_value:
                 corrected[i] = xi
                 info[i] = True
+        total = tot[0] + tot[1]
+        lacking_all = [j for j in range(_N) if not info[j]]
+        known_all = math.fsum(corrected[j] for j in range(_N) if info[j] and
+                              math.isfinite(corrected[j]))
         for i, name in enumerate(SENSOR_NAMES):
             s = sens[i]
-            f = i // 4
-            idx = range(4 * f, 4 * f + 4)
             vi = v[i] if math.isfinite(v[i]) else 0.0
-            if not info[i] and contact[f] and math.isfinite(tot[f]):
-                # foot balance: the VFS foot total minus the known corners
-                lacking = [j for j in idx if not info[j]]
-                known = math.fsum(corrected[j] for j in idx if info[j] and
-                                  math.isfinite(corrected[j]))
-                rest = tot[f] - known
-                if len(lacking) > 1:
-                    vs = [max(v[j], 0.0) if math.isfinite(v[j]) else 0.0 for j in lacking]
+            if not info[i] and math.isfinite(total):
+                # whole-body balance: the VFS total force minus every known sensor (the
+                # total is precise in every phase, unlike the per-foot split of the VFS)
+                rest = total - known_all
+                if len(lacking_all) > 1:
+                    vs = [max(v[j], 0.0) if math.isfinite(v[j]) else 0.0 for j in lacking_all]
                     share = (max(v[i], 0.0) if math.isfinite(v[i]) else 0.0) / sum(vs) \
-                        if sum(vs) > 0 else 1.0 / len(lacking)
+                        if sum(vs) > 0 else 1.0 / len(lacking_all)
                     rest *= share
-                balance = max(rest, 0.0)
-            else:
-                balance = vi
-            # weight of the balance: 1 in clean single support, 0 elsewhere (smoothed)
-            s.delta += ((1.0 if ss_ok[f] else 0.0) - s.delta) * (a_track if ss_ok[f]
-                                                                   else a_decay)
-            if contact[f]:
-                repl = max(s.delta * balance + (1.0 - s.delta) * vi, 0.0)
+                repl = max(rest, 0.0)
             else:
                 repl = max(vi, 0.0)
-            w = s.hand.update(1.0 if s.flag else 0.0)
+            # a reading without information is dropped fast (5 ms); additive corrections
+            # and the hand-back blend over blend_s
+            w = s.hand.update(1.0 if s.flag else 0.0,
+                              a_fast if (s.flag and not info[i]) else None)
             rec_fault = corrected[i] if info[i] and math.isfinite(corrected[i]) else repl
+            if s.flag and s.kind == "saturation" and not info[i]:
+                rec_fault = max(rec_fault, s.const_value)  # clipped: the truth is above
             rec = HandOver.mix(w, x[i], rec_fault, s.last_rec)
             if not math.isfinite(rec):
                 rec = s.last_rec
@@ -984,6 +1008,7 @@ def calibrate_thresholds(
     false_alarm_rate_per_hour: float = 0.1,
     config: MonitorConfig | str | Path | None = None,
     safety: float = 1.5,
+    min_h: float = 30.0,
 ) -> Thresholds:
     """Calibrate every threshold from fault-free logs for a stated false-alarm rate.
 
@@ -999,6 +1024,8 @@ def calibrate_thresholds(
         false_alarm_rate_per_hour: Target rate of the whole detector [1/h].
         config: Monitor config (or a TOML path); its gates and CUSUM allowances are used.
         safety: Factor on the largest fault-free statistic.
+        min_h: Lower bound of every CUSUM threshold [σ·samples] (a margin for walks
+            unlike the calibration ones).
 
     Returns:
         New :class:`Thresholds`.
@@ -1062,9 +1089,9 @@ def calibrate_thresholds(
     p_sw = peaks("res_swing_", SENSOR_NAMES, sigma_sw, base.swing_kappa)
     p_t = peaks("res_total_", SIDES, sigma_t, base.total_kappa)
     p_c = peaks("res_corner_", SENSOR_NAMES, sigma_c, base.corner_kappa)
-    h_sw = threshold_for_rate(p_sw, hours * 8, rate, safety, floor=10.0)
-    h_t = threshold_for_rate(p_t, hours * 2, rate, safety, floor=10.0)
-    h_c = threshold_for_rate(p_c, hours * 8, rate, safety, floor=10.0)
+    h_sw = threshold_for_rate(p_sw, hours * 8, rate, safety, floor=min_h)
+    h_t = threshold_for_rate(p_t, hours * 2, rate, safety, floor=min_h)
+    h_c = threshold_for_rate(p_c, hours * 8, rate, safety, floor=min_h)
     paper_tr = tuple(float(max(safety * m, 1.0)) for m in paper_max)
     return base.replace(
         sigma_swing_n=sigma_sw,

@@ -3,10 +3,11 @@
 - additive faults (offset, drift): ``N_rec = N_meas - η̂``;
 - gain: ``N_rec = N_meas / ĝ``;
 - sensors that carry no information (frozen, stuck, dropout, clipped, noisy): the
-  virtual sensor, corrected in clean single support by the foot-total balance
-  ``N_rec,i = F_z,foot - Σ_{j≠i} N_j`` (the foot total of the VFS is far more precise
-  than its corners); the correction ``δ = N_rec,i - N̂_i`` is tracked with a short time
-  constant in single support and decays slowly elsewhere, so hand-overs are smooth;
+  whole-body balance ``N_rec,i = F_z,VFS(both feet) - Σ_{j≠i} N_j`` over the other seven
+  (healthy or corrected) sensors: the total vertical force of the VFS is precise in every
+  phase (a few N), unlike its per-foot split in double support and its corners (tens of
+  N); several such sensors share the rest by their VFS corner forces; the VFS corner
+  itself is the fallback;
 - the output blends from the measurement to the reconstruction (and back) with a first
   order ramp, and is never NaN.
 """
@@ -40,9 +41,10 @@ class HandOver:
         """Back to the measurement."""
         self.w = 0.0
 
-    def update(self, target: float) -> float:
-        """Move ``w`` toward ``target`` (0 or 1) and return it."""
-        self.w += (target - self.w) * self.alpha
+    def update(self, target: float, alpha: float | None = None) -> float:
+        """Move ``w`` toward ``target`` (0 or 1) and return it (``alpha`` overrides the
+        step fraction ``dt / tau`` for this sample)."""
+        self.w += (target - self.w) * (self.alpha if alpha is None else alpha)
         return self.w
 
     @staticmethod
