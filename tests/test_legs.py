@@ -29,8 +29,11 @@ def test_corner_contact_heights_and_plan() -> None:
     h[4:6] = 0.02  # left toes lifted (heel-first landing)
     c = corner_contact(h, np.array([True, True]), 0.003)
     assert c.tolist() == [True] * 4 + [False, False, True, True]
-    # the plan wins over low corners of a swing foot
+    # kinematics wins over the plan: a foot on the ground touches even if planned in swing
+    # (early touchdown, late lift-off); without kinematics the plan decides
     c = corner_contact(np.zeros(8), np.array([True, False]), 0.003)
+    assert c.all()
+    c = corner_contact(np.zeros(8), np.array([True, False]), 0.003, kinematic=False)
     assert c.tolist() == [True] * 4 + [False] * 4
     # a planned foot with every corner high keeps its lowest corner
     h = np.full(8, 0.01)

@@ -3,8 +3,8 @@ r"""Leg force split, centre of pressure and contact-point forces.
 Two methods, both on arrays over time (leading axis ``T``) and usable on one sample:
 
 * ``qp`` (default, physically consistent). The corners in contact ``K`` come from the
-  planned stance and the kinematic corner heights (never from the monitored sensors
-  alone). One QP over all of them, in world coordinates relative to the ZMP ``p``:
+  kinematic corner heights, with the planned stance as a fallback (never from the
+  monitored sensors). One QP over all of them, in world coordinates relative to the ZMP ``p``:
 
   .. math::
 
@@ -58,17 +58,18 @@ def corner_contact(
 ) -> np.ndarray:
     """Corners taken to be in contact.
 
-    A corner touches when its foot is in planned stance and (with ``kinematic``) the
-    corner is within ``contact_height_m`` of the ground. A planned-stance foot with no
-    corner that low keeps its lowest corner (the plan says it is down; a slightly
-    miscalibrated height must not leave the robot floating). If no foot is in planned
-    stance, the lowest foot's corners are used.
+    With ``kinematic`` a corner touches when it is within ``contact_height_m`` of the
+    ground, whatever the plan says: feet land early or late and heel first (DESIGN.md),
+    and the plan is wrong in those windows. A planned-stance foot with no corner that low
+    keeps its lowest corner (the plan says it is down; a slightly wrong height must not
+    leave the robot floating). Without ``kinematic`` every corner of a planned-stance foot
+    touches (the paper). If no foot is planned in stance, the lowest foot counts as planned.
 
     Args:
         corner_height_m: (..., 8) height of each corner above the ground [m].
         stance: (..., 2) planned stance (right, left), bool.
         contact_height_m: Threshold [m].
-        kinematic: Use the heights (else every corner of a stance foot is in contact).
+        kinematic: Use the heights.
 
     Returns:
         (..., 8) bool.
@@ -83,10 +84,9 @@ def corner_contact(
     if not kinematic:
         return foot
     low = h < contact_height_m
-    lowest = feet_h == feet_h.min(axis=-1, keepdims=True)
-    lowest = lowest.reshape(h.shape)
+    lowest = (feet_h == feet_h.min(axis=-1, keepdims=True)).reshape(h.shape)
     any_low = np.repeat(feet_h.min(axis=-1) < contact_height_m, 4, axis=-1)
-    return foot & (low | (~any_low & lowest))
+    return low | (foot & ~any_low & lowest)
 
 
 def split_qp(
