@@ -39,8 +39,10 @@ def _num(name: str, value: Any, lo: float, hi: float, unit: str) -> None:
 class VFSConfig:
     """Settings of :class:`grfguard.estimate.vfs.VirtualForceSensor`.
 
-    The defaults are the sensor-free multibody estimator with one QP over all corners in
-    contact (chosen by measured accuracy, see BENCHMARKS.md "Virtual force sensor").
+    The defaults are the sensor-free multibody estimator (encoders, IMU attitude, gyro and
+    accelerometer; never the force sensors) with one QP over all corners in contact and a
+    sole-compliance prior (chosen by measured accuracy, see BENCHMARKS.md "Virtual force
+    sensor").
     ``VFSConfig.paper()`` gives the paper's method (LIPM Kalman filter, alpha split,
     eq. 10-12 read literally, ``W = 0.01``).
     """
@@ -51,8 +53,9 @@ class VFSConfig:
     #: Leg split and CoP: ``qp`` (single support: all on the stance foot; double support:
     #: one QP over all corners) or ``paper`` (alpha rule eq. 6-9 and eq. 10-12 literally).
     split_method: str = "qp"
-    #: Diagonal weight ``w`` of the contact-point QP ``|C N - d|^2 + w |N|^2`` in [m^2]
-    #: (the paper uses 0.01, which biases the CoP toward the sole centre).
+    #: Diagonal weight ``w`` of the contact-point QP ``|C N - d|^2 + w |N - N_prior|^2`` in
+    #: [m^2] (``N_prior = 0`` without the compliance prior). The paper uses 0.01, which
+    #: biases the CoP toward the sole centre.
     qp_weight: float = 1e-6
     #: Cut-off of the causal Butterworth low-pass on the CoM and angular momentum before
     #: differentiation in [Hz] (higher lets attitude jitter through).
@@ -75,7 +78,7 @@ class VFSConfig:
     attitude_time_constant: float = 0.5
     #: Time constant with which the anchored stance foot's orientation (which replaces the
     #: IMU attitude at high frequency) is pulled toward the IMU attitude in [s]; 0 uses
-    #: the IMU attitude directly.
+    #: the IMU attitude directly (measured better: feet rock on soft contacts).
     anchor_attitude_time_constant: float = 0.0
     #: ZMP from the multibody rates: ``direct`` (Newton-Euler with the filtered rates) or
     #: ``kalman`` (pendulum Kalman filter with the ZMP as a state on the kinematic CoM,
@@ -98,7 +101,8 @@ class VFSConfig:
     #: Corner height above the ground plane below which a corner counts as touching, in [m]
     #: (kinematic contact; heel-first landing and toe-off).
     contact_height: float = 0.003
-    #: Use the kinematic corner heights to drop lifted corners of a planned-stance foot.
+    #: Decide contact per corner from the kinematic corner heights (the plan only as a
+    #: fallback); False uses the planned stance only (the paper).
     kinematic_contact: bool = True
     # ------------------------------------------------------------------ paper CoM filter
     #: LIPM CoM height ``z_c`` in [m] for the paper's filter; 0 means "from the model
