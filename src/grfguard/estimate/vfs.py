@@ -2,13 +2,21 @@
 
 Pipeline per sample (DESIGN.md, "Pipeline"):
 
-1. kinematics (:mod:`grfguard.estimate.kinematic`): whole-body CoM, body poses, corner
-   points relative to the trunk, from the encoders and the IMU attitude;
-2. leg odometry (:class:`grfguard.estimate.com.LegOdometry`): trunk position in world;
-3. momentum (:mod:`grfguard.estimate.com`): ``multibody`` (default, sensor-free) or the
-   paper's LIPM Kalman filter (``paper``, reads the force sensors through the measured ZMP);
-4. split (:mod:`grfguard.estimate.legs`): one QP over all corners in contact (``qp``,
-   default) or the paper's alpha rule and eq. 10-12 (``paper``).
+1. attitude (:class:`grfguard.estimate.kinematic.AttitudeFilter`): gyro integration pulled
+   toward the logged IMU quaternion (its 1 mrad jitter would become fake accelerations);
+2. kinematics (:mod:`grfguard.estimate.kinematic`): whole-body CoM, body poses, corner
+   points relative to the trunk, from the encoders and that attitude;
+3. leg odometry (:class:`grfguard.estimate.com.LegOdometry`): trunk position in world,
+   anchored on a flat stance foot;
+4. momentum (:mod:`grfguard.estimate.com`): ``multibody`` (default, sensor-free): CoM
+   acceleration = accelerometer (above 1 Hz) + odometry (below) + kinematic CoM motion
+   relative to the IMU (15 Hz Butterworth), centroidal angular-momentum rate by finite
+   differences (15 Hz), ZMP by Newton-Euler; or the paper's LIPM Kalman filter (``paper``,
+   reads the force sensors through the measured ZMP);
+5. split (:mod:`grfguard.estimate.legs`, :mod:`grfguard.estimate.compliance`): contact per
+   corner from the kinematic heights, one QP over all corners in contact with the total
+   force, the ZMP and a sole-compliance prior (``qp``, default), or the paper's alpha rule
+   and eq. 10-12 (``paper``).
 
 :class:`VirtualForceSensor` streams (``update``) and batches (``run``); both give the same
 numbers. A sample with a non-finite input is skipped (the state does not move), the last
