@@ -8,8 +8,11 @@ total ground force ``F = m (c_dd + g e_z)`` [N] and the ZMP ``p`` on the ground 
   (encoders + IMU attitude), trunk position from leg odometry anchored on a stance foot that
   is flat on the ground (planned stance + kinematic corner heights, never the force
   sensors), ``c_dd`` and ``L_dot`` by finite differences through a causal Butterworth
-  low-pass. Newton-Euler about the CoM with the ground force acting at the ZMP ``p`` (ground
-  height ``z_g``, ``h = c_z - z_g``)::
+  low-pass (``VirtualForceSensor`` also fuses the accelerometer for the IMU-point
+  acceleration: accelerometer above ~1 Hz, odometry below, which removes its bias). A
+  pendulum Kalman filter with the ZMP as a state (:class:`ZMPKalmanFilter`) is the
+  alternative when there is no usable accelerometer. Newton-Euler about the CoM with
+  the ground force acting at the ZMP ``p`` (ground height ``z_g``, ``h = c_z - z_g``)::
 
       L_dot = (p - c) x F   =>   p_x = c_x - (h F_x + L_dot_y) / F_z
                                  p_y = c_y - (h F_y - L_dot_x) / F_z
@@ -38,6 +41,7 @@ __all__ = [
     "zmp_from_momentum",
     "PaperCoMFilter",
     "lipm_kalman_matrices",
+    "ZMPKalmanFilter",
 ]
 
 #: Smallest vertical force used as a divisor [N].
