@@ -102,10 +102,12 @@ def test_paper_scenario_right_foot(runs) -> None:
     d = tab["delay_s"]
     # frozen: the right foot is loaded from the onset on (touchdown at 5.0 s)
     assert d["r1"] <= 0.2
-    # The faulty foot only swings 1.2 s after the onset (see the module docstring) and
-    # the VFS corners are not precise enough to catch 100 N in stance: detected at the
-    # start of the next swing window.
-    assert d[["r2", "r3", "r4"]].max() <= 1.5
+    # offsets: per-corner residuals in clean single support (from 5.32 s)
+    assert d["r2"] <= 0.5 and d["r4"] <= 0.5
+    # The drift (15 N/s) is below the corner noise until the foot swings again (the
+    # foot-total test is blind while r1 carries no information): detected at the start
+    # of the next swing window, 6.32 s. The mirror scenario meets the 1 s bound.
+    assert d["r3"] <= 1.5
 
 
 def test_paper_method_same_runs_reported(runs) -> None:
