@@ -50,16 +50,17 @@ METHODS: list[tuple[str, VFSConfig]] = [
 ]
 
 
-NOTES = """Choices (measured on 20 s walks while developing; see the report of the VFS issue):
-the accelerometer fusion (accelerometer above 1 Hz, odometry below, kinematic CoM motion
-relative to the IMU through 15 Hz) took the SS corner RMSE from 31.6 N (odometry only,
-15 Hz) to 12.2 N; without an accelerometer the pendulum Kalman ZMP (20.2 N) beats direct
-differentiation. The sole-compliance prior of the corner QP (4.2e3 N/(m kg)) took DS from
-104 N to 12 N: with torque feed-forward the simulated robot stands and walks with internal
-forces between the feet (inner sole edges ~250 N, outer ~35 N) that a rigid min-norm QP
-cannot see. Contact per corner from kinematic heights (not the plan) fixed the early
-touchdown of the slow gait (DS 58 N -> 23 N). The paper's eq. 10-12 read literally (CoP =
-h F_xy / F_z, CoM-to-foot offset dropped) is what makes the paper's split 100-200 N.
+NOTES = """Choices (measured on 20 s walks while developing): the accelerometer fusion
+(accelerometer above 1 Hz, odometry below, kinematic CoM motion relative to the IMU through
+15 Hz; horizontal axes only, the vertical from odometry halves the per-foot error) took
+the SS corner RMSE from 31.6 N (odometry only, 15 Hz) to 12 N; without an accelerometer
+the pendulum Kalman ZMP (20 N) beats direct differentiation (32 N). The sole-compliance
+prior of the corner QP (4.2e3 N/(m kg)) took DS from 104 N to 12 N: with torque
+feed-forward the simulated robot stands and walks with internal forces between the feet
+(inner sole edges ~250 N, outer ~35 N) that a rigid min-norm QP cannot see. Contact per
+corner from kinematic heights (not the plan) fixed the early touchdown of the slow gait
+(DS 58 N -> 23 N). The paper's eq. 10-12 read literally (CoP = h F_xy / F_z, CoM-to-foot
+offset dropped) is what makes the paper's split 100-200 N.
 """
 
 

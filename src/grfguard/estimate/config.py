@@ -65,6 +65,9 @@ class VFSConfig:
     #: the lag of differentiating odometry); the CoM motion relative to the IMU comes from
     #: kinematics through the ``filter_cutoff`` low-pass.
     use_accelerometer: bool = True
+    #: Use the accelerometer for the vertical acceleration too (else odometry only: the
+    #: vertical CoM motion is small and slow, and the accelerometer noise would dominate).
+    accelerometer_vertical: bool = False
     #: Cross-over of the accelerometer / odometry complementary filter in [Hz].
     fusion_cutoff: float = 1.0
     #: Low-pass on the accelerometer (white noise) in [Hz].
@@ -140,7 +143,12 @@ class VFSConfig:
             )
         _num("fusion_cutoff", self.fusion_cutoff, 0.01, 0.45 / self.dt, "Hz")
         _num("acc_cutoff", self.acc_cutoff, 0.1, 0.45 / self.dt, "Hz")
-        for flag in ("use_angular_momentum", "kinematic_contact", "use_accelerometer"):
+        for flag in (
+            "use_angular_momentum",
+            "kinematic_contact",
+            "use_accelerometer",
+            "accelerometer_vertical",
+        ):
             if not isinstance(getattr(self, flag), bool):
                 raise ConfigError(f"vfs.{flag} must be true or false, got {getattr(self, flag)!r}")
         _num("attitude_time_constant", self.attitude_time_constant, 0.0, 1e3, "s")

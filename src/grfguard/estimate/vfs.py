@@ -349,6 +349,8 @@ class VirtualForceSensor:
         if acc_W is not None:
             c_dd = run(self._lp_acc, acc_W) + run(self._lp_fuse, raw[:, 6:9] - acc_W)
             c_dd = c_dd + main[:, 0:3]
+            if not c.accelerometer_vertical:
+                c_dd[:, 2] = main[:, 2] + main[:, 8]
         else:
             c_dd = main[:, 0:3] + main[:, 6:9]
         ld = main[:, 3:6] if c.use_angular_momentum else np.zeros_like(main[:, 3:6])
