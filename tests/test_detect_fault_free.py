@@ -7,6 +7,8 @@ small robot to check that the per-phase normalisation carries over.
 
 from __future__ import annotations
 
+import os
+
 import pandas as pd
 import pytest
 
@@ -52,3 +54,21 @@ def test_same_thresholds_detect_on_every_walk(free_walk: pd.DataFrame) -> None:
     assert tab.loc["r3", "detected"] and tab.loc["r3", "kind_estimated"] == "frozen"
     assert tab.loc["l2", "delay_s"] < 2.0 and tab.loc["r3", "delay_s"] < 2.0
     assert tab["false_alarms"].sum() == 0
+
+
+@pytest.mark.skipif(
+    not os.environ.get("GRFGUARD_LONG_TESTS"),
+    reason="10 min of walking (~2-4 min); set GRFGUARD_LONG_TESTS=1 (also run by "
+    "benchmarks/bench_monitor.py)",
+)
+def test_ten_minutes_fault_free_zero_alarms() -> None:
+    """3 gaits x seeds 1-2 x 100 s = 10 min, shipped thresholds (calibrated on 101-103)."""
+    from grfguard.sim import GaitConfig, simulate
+
+    for sl, sp in ((0.12, 1.0), (0.15, 0.8), (0.08, 1.2)):
+        for seed in (1, 2):
+            log = with_vfs(simulate(gait=GaitConfig(step_length=sl, step_period=sp,
+                                                    duration=100.0), seed=seed))
+            res = Monitor.for_log(log).run(log)
+            flags = res[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy()
+            assert not flags.any(), (sl, sp, seed, flags.sum(axis=0))
