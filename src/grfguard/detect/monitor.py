@@ -217,7 +217,7 @@ class _Sensor:
     __slots__ = (
         "prev", "run", "gp", "gn", "cp", "cn", "flag", "source", "kind", "t_flag",
         "valid_since_alarm", "eta", "const_value", "varied", "returns", "n", "st", "sx",
-        "stt", "stx", "sxx", "n_out", "sgl", "sll", "delta", "hand", "last_rec", "x1", "x2",
+        "stt", "stx", "sxx", "n_out", "gain", "hand", "last_rec", "x1", "x2",
         "last_alarm", "lp", "sn", "sL", "sr", "sLL", "sLr", "srr", "eta_st",
     )
 
@@ -226,7 +226,6 @@ class _Sensor:
         self.run = 0
         self.gp = self.gn = 0.0
         self.cp = self.cn = 0.0
-        self.delta = 0.0
         self.hand = HandOver(blend_alpha_tau, dt)
         self.last_rec = 0.0
         self.x1 = self.x2 = _NAN
@@ -247,7 +246,7 @@ class _Sensor:
         self.n = 0
         self.st = self.sx = self.stt = self.stx = self.sxx = 0.0
         self.n_out = 0
-        self.sgl = self.sll = 0.0
+        self.gain = _NAN
         self.sn = 0
         self.sL = self.sr = self.sLL = self.sLr = self.srr = 0.0
         self.eta_st = _NAN
@@ -886,7 +885,7 @@ class Monitor:
             if abs(g0) > 0.05 and sse_gain < sse_const and 1.0 + g0 > 0.05:
                 s.kind = "gain"
                 s.eta = _NAN
-                s.sgl, s.sll = 1.0 + g0, 1.0  # gain estimate for the recovery
+                s.gain = 1.0 + g0  # gain estimate for the recovery
                 return
             s.kind = "offset"
             s.eta = s.eta_st
@@ -918,8 +917,8 @@ class Monitor:
                 s.lp = xi if math.isnan(s.lp) else s.lp + (xi - s.lp) * a_lp
             if s.flag and s.kind in _ADDITIVE and math.isfinite(s.eta):
                 corrected[i] = xi - s.eta
-            elif s.flag and s.kind == "gain" and s.sll > 0 and s.sgl / s.sll > 0.05:
-                corrected[i] = xi / (s.sgl / s.sll)
+            elif s.flag and s.kind == "gain" and s.gain > 0.05:
+                corrected[i] = xi / s.gain
             elif s.flag and s.kind == "noise" and math.isfinite(s.lp):
                 corrected[i] = s.lp
             elif s.flag and s.kind == "spikes":
