@@ -939,6 +939,13 @@ class Monitor:
                               math.isfinite(corrected[j]))
         for i, name in enumerate(SENSOR_NAMES):
             s = sens[i]
+            xi = x[i]
+            if not s.flag and s.hand.w == 0.0 and math.isfinite(xi):
+                # healthy and fully handed back: the measurement itself
+                s.last_rec = xi
+                out[recovered_col(name)] = xi
+                out[eta_col(name)] = 0.0
+                continue
             vi = v[i] if math.isfinite(v[i]) else 0.0
             if not info[i] and math.isfinite(total):
                 # whole-body balance: the VFS total force minus every known sensor (the

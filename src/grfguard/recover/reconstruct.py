@@ -45,6 +45,8 @@ class HandOver:
         """Move ``w`` toward ``target`` (0 or 1) and return it (``alpha`` overrides the
         step fraction ``dt / tau`` for this sample)."""
         self.w += (target - self.w) * (self.alpha if alpha is None else alpha)
+        if abs(target - self.w) < 1e-6:
+            self.w = float(target)  # snap: the hand-over is finished
         return self.w
 
     @staticmethod
