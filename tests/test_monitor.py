@@ -141,3 +141,24 @@ def test_config_round_trip_and_errors(tmp_path) -> None:
 def test_run_needs_forces() -> None:
     with pytest.raises(LogFormatError, match="force_r1"):
         Monitor(MonitorConfig(), None).run(pd.DataFrame({"time": [0.0, 0.001]}))
+
+
+def test_calibrate_thresholds_from_fault_free_logs(short_log: pd.DataFrame) -> None:
+    from grfguard.detect.monitor import calibrate_thresholds
+
+    clean = short_log.iloc[:4900].drop(
+        columns=[c for c in short_log.columns if c.startswith(("fault_", "fault_kind_"))]
+    )
+    th = calibrate_thresholds([clean], false_alarm_rate_per_hour=0.5)
+    assert 1.5 < th.sigma_swing_n < 2.5  # the simulated sensor noise is 2 N
+    assert th.swing_h >= 30.0 and th.total_h >= 30.0 and th.corner_h >= 30.0
+    assert all(x > 0 for x in th.paper_eta_n)
+    assert th.false_alarm_rate_per_hour == 0.5 and "1 fault-free log" in th.source
+    assert Thresholds.from_toml_text(th.to_toml()) == th
+    # the calibrated monitor raises no alarm on its own calibration data
+    out = Monitor.for_log(clean, MonitorConfig(thresholds=th)).run(clean)
+    assert not out[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy().any()
+    with pytest.raises(ConfigError, match="fault-free"):
+        calibrate_thresholds([short_log], 0.1)
+    with pytest.raises(ConfigError, match="at least one"):
+        calibrate_thresholds([], 0.1)
