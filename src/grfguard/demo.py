@@ -85,6 +85,12 @@ def run_demo(
         runs["default"], out_dir / "figures",
         metrics=results["default"].get("detection", {}).get("sensors"),
     )
+    # The same figures over six seconds around the onset, where single steps are visible.
+    pngs += write_png_figures(
+        runs["default"], out_dir / "figures_zoom",
+        metrics=results["default"].get("detection", {}).get("sensors"),
+        t_range=(3.0, 9.0), per_sensor=False,
+    )
     pngs += write_png_figures(
         runs["paper"], out_dir / "figures_paper",
         metrics=results["paper"].get("detection", {}).get("sensors"),
