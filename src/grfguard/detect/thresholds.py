@@ -50,17 +50,18 @@ class Thresholds:
         source: Free text: where they come from.
     """
 
+    # Built-in values = the shipped calibration, rounded (used if the file is missing).
     sigma_swing_n: float = 2.0
     swing_kappa: float = 3.0
-    swing_h: float = 60.0
-    total_sigma: float = 0.01
+    swing_h: float = 30.0
+    total_sigma: float = 0.0038
     total_kappa: float = 3.0
-    total_h: float = 300.0
-    corner_sigma: float = 0.03
+    total_h: float = 30.0
+    corner_sigma: float = 0.011
     corner_kappa: float = 3.0
-    corner_h: float = 300.0
+    corner_h: float = 30.0
     const_samples: int = 25
-    paper_eta_n: tuple[float, ...] = (100.0,) * 8
+    paper_eta_n: tuple[float, ...] = (15.2, 20.6, 24.1, 19.4, 48.6, 26.3, 29.3, 31.0)
     false_alarm_rate_per_hour: float = 0.1
     source: str = "builtin"
 
