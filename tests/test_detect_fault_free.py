@@ -1,13 +1,12 @@
 """Fault-free walks: zero alarms with the shipped thresholds (calibrated on other seeds).
 
-The full 10-minute check (3 gaits x 2 seeds x 100 s) runs in benchmarks/bench_monitor.py;
-here the first 20 s of the session walks: default, fast and slow gaits, and the 60 kg
-small robot to check that the per-phase normalisation carries over.
+The full 10-minute check (3 gaits x 2 seeds x 100 s, about 1.5 min) runs here and in
+benchmarks/bench_monitor.py; the other tests use the first 20 s of the session walks:
+default, fast and slow gaits, and the 60 kg small robot to check that the per-phase
+normalisation carries over.
 """
 
 from __future__ import annotations
-
-import os
 
 import pandas as pd
 import pytest
@@ -56,11 +55,6 @@ def test_same_thresholds_detect_on_every_walk(free_walk: pd.DataFrame) -> None:
     assert tab["false_alarms"].sum() == 0
 
 
-@pytest.mark.skipif(
-    not os.environ.get("GRFGUARD_LONG_TESTS"),
-    reason="10 min of walking (~2-4 min); set GRFGUARD_LONG_TESTS=1 (also run by "
-    "benchmarks/bench_monitor.py)",
-)
 def test_ten_minutes_fault_free_zero_alarms() -> None:
     """3 gaits x seeds 1-2 x 100 s = 10 min, shipped thresholds (calibrated on 101-103)."""
     from grfguard.sim import GaitConfig, simulate

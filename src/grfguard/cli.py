@@ -91,7 +91,8 @@ def simulate(
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard.io.logio import write_log
     from grfguard.model.robot import load_robot
-    from grfguard.sim import GaitConfig, NoiseConfig, simulate as _simulate
+    from grfguard.sim import GaitConfig, NoiseConfig
+    from grfguard.sim import simulate as _simulate
 
     rob = load_robot(robot)
     gait_kw: dict[str, Any] = {"duration": duration}
@@ -171,30 +172,72 @@ def run(
     config: Annotated[Path | None, typer.Option(help="Monitor/VFS config TOML.")] = None,
     thresholds: Annotated[Path | None, typer.Option(help="Thresholds TOML (calibrate).")] = None,
     method: Annotated[
-        str | None, typer.Option(help="Detection method: default or paper.")
+        str | None,
+        typer.Option(help="Detection method: default, or paper (eq. 24-33 as published)."),
+    ] = None,
+    vfs: Annotated[
+        str | None,
+        typer.Option(
+            help="Virtual sensor: default or paper (eq. 1-23). Default: the paper's with "
+            "--method paper, ours otherwise."
+        ),
     ] = None,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
     from grfguard.io.logio import load_log, write_log
 
     df = load_log(log)
-    result = _run_monitor(df, config=config, thresholds=thresholds, method=method)
+    result = _run_monitor(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
     write_log(result, output)
     console.print(f"wrote {output}: {len(result)} samples")
 
 
-def _run_monitor(
-    df: Any, config: Path | None, thresholds: Path | None, method: str | None
+def monitor_config(
+    config: Path | None = None,
+    thresholds: Path | None = None,
+    method: str | None = None,
+    vfs: str | None = None,
 ) -> Any:
-    from grfguard.detect.monitor import Monitor, MonitorConfig
+    """The monitor configuration the command-line options describe.
+
+    ``method="paper"`` means the paper as published: its observer and, unless ``vfs``
+    or the config file says otherwise, its virtual sensor too.
+    """
+    from grfguard.detect.monitor import MonitorConfig
+    from grfguard.detect.thresholds import default_thresholds, paper_vfs_thresholds
+    from grfguard.errors import ConfigError
+    from grfguard.estimate.config import VFSConfig
 
     cfg = MonitorConfig.from_toml(config) if config is not None else MonitorConfig()
     if method is not None:
         cfg = cfg.with_method(method)
+    if vfs is None and method == "paper" and cfg.vfs is None:
+        vfs = "paper"
+    if vfs == "paper":
+        cfg = cfg.replace(vfs=VFSConfig.paper())
+        if thresholds is None and cfg.thresholds == default_thresholds():
+            # the paper's eq. 33 thresholds come from fault-free runs of its own pipeline
+            cfg = cfg.with_thresholds(paper_vfs_thresholds())
+    elif vfs == "default":
+        cfg = cfg.replace(vfs=VFSConfig())
+    elif vfs is not None:
+        raise ConfigError(f"--vfs must be 'default' or 'paper', got {vfs!r}")
     if thresholds is not None:
         cfg = cfg.with_thresholds(thresholds)
-    mon = Monitor.for_log(df, config=cfg)
-    return mon.run(df)
+    return cfg
+
+
+def _run_monitor(
+    df: Any,
+    config: Path | None,
+    thresholds: Path | None,
+    method: str | None,
+    vfs: str | None = None,
+) -> Any:
+    from grfguard.detect.monitor import Monitor
+
+    cfg = monitor_config(config, thresholds, method, vfs)
+    return Monitor.for_log(df, config=cfg).run(df)
 
 
 # -------------------------------------------------------------------------- evaluate

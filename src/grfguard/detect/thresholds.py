@@ -17,9 +17,17 @@ from typing import Any
 
 from grfguard.errors import ConfigError
 
-__all__ = ["Thresholds", "default_thresholds", "DEFAULT_THRESHOLDS_FILE"]
+__all__ = [
+    "Thresholds",
+    "default_thresholds",
+    "paper_vfs_thresholds",
+    "DEFAULT_THRESHOLDS_FILE",
+    "PAPER_VFS_THRESHOLDS_FILE",
+]
 
 DEFAULT_THRESHOLDS_FILE = "default_thresholds.toml"
+#: Thresholds for the paper's method on the paper's own virtual sensor (eq. 1-23).
+PAPER_VFS_THRESHOLDS_FILE = "paper_vfs_thresholds.toml"
 
 
 @dataclass(frozen=True)
@@ -148,10 +156,24 @@ class Thresholds:
         return cls.from_toml_text(p.read_text())
 
 
+def _shipped(name: str) -> Thresholds | None:
+    try:
+        text = resources.files("grfguard.detect").joinpath(name).read_text()
+    except (FileNotFoundError, OSError):
+        return None
+    return Thresholds.from_toml_text(text)
+
+
 def default_thresholds() -> Thresholds:
     """The shipped thresholds (package data), or the built-in values if it is missing."""
-    try:
-        text = resources.files("grfguard.detect").joinpath(DEFAULT_THRESHOLDS_FILE).read_text()
-    except (FileNotFoundError, OSError):
-        return Thresholds()
-    return Thresholds.from_toml_text(text)
+    return _shipped(DEFAULT_THRESHOLDS_FILE) or Thresholds()
+
+
+def paper_vfs_thresholds() -> Thresholds:
+    """Thresholds for the paper's observer on the paper's virtual sensor.
+
+    The paper picks its eq. 33 thresholds from a fault-free run of its own pipeline; these
+    were picked the same way (``benchmarks/calibrate_default_thresholds.py --vfs paper``)
+    on the calibration walks. Falls back to :func:`default_thresholds`.
+    """
+    return _shipped(PAPER_VFS_THRESHOLDS_FILE) or default_thresholds()

@@ -115,7 +115,9 @@ def read_log(
         try:
             meta = json.loads(raw) if raw else {}
         except json.JSONDecodeError as exc:
-            raise LogFormatError(f"{path}: the grfguard metadata is not valid JSON ({exc})") from exc
+            raise LogFormatError(
+                f"{path}: the grfguard metadata is not valid JSON ({exc})"
+            ) from exc
         df = table.to_pandas()
     df.attrs.update(meta)
     df.attrs.setdefault("source", str(path))

@@ -150,10 +150,8 @@ class RobotConfig:
         _check_range("trunk_height", self.trunk_height, 0.05, 3.0, "m")
         _check_range("trunk_depth", self.trunk_depth, 0.02, 2.0, "m")
         _check_range("contact_radius", self.contact_radius, 0.0005, 0.05, "m")
-        _check_range(
-            "sensor_inset", self.sensor_inset, 0.0, min(self.foot_length, self.foot_width) / 2 - 1e-3,
-            "m",
-        )
+        max_inset = min(self.foot_length, self.foot_width) / 2 - 1e-3
+        _check_range("sensor_inset", self.sensor_inset, 0.0, max_inset, "m")
         _check_range("armature", self.armature, 0.0, 100.0, "kg m^2")
         if self.hip_width <= self.foot_width:
             raise ConfigError(
