@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
 import statistics
 import sys
 import time
@@ -29,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import update_section  # noqa: E402
 from calibrate_default_thresholds import walk_with_vfs  # noqa: E402
 
 from grfguard.detect.monitor import Monitor, MonitorConfig  # noqa: E402
@@ -153,16 +153,11 @@ def speed(walk: pd.DataFrame) -> list[str]:
     return lines
 
 
-def update_benchmarks_md(body: str, path: Path = ROOT / "BENCHMARKS.md") -> None:
-    """Replace (or append) only the ``## Fault detection`` section of ``path``."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    block = f"{SECTION}\n\n{body.strip()}\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(text):
-        text = pattern.sub(lambda _m: block + "\n", text, count=1)
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    path.write_text(text.rstrip("\n") + "\n")
+def update_benchmarks_md(
+    body: str, path: Path = ROOT / "BENCHMARKS.md", section: str = SECTION
+) -> None:
+    """Replace (or append) only ``section`` (default ``## Fault detection``) of ``path``."""
+    update_section(section, body, path)
 
 
 def main() -> None:

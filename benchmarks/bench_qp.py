@@ -22,11 +22,11 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
 import time
 from pathlib import Path
 
 import numpy as np
+from _common import BENCHMARKS_MD, update_section
 
 from grfguard.estimate.distribute import (
     DEFAULT_WEIGHT,
@@ -236,15 +236,8 @@ def main() -> None:
     )
     print(text)
     if args.write:
-        path = ROOT / "BENCHMARKS.md"
-        old = path.read_text() if path.exists() else "# Benchmarks\n"
-        pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-        if pattern.search(old):
-            new = pattern.sub(lambda _m: text + "\n", old)
-        else:
-            new = old.rstrip("\n") + "\n\n" + text
-        path.write_text(new)
-        print(f"wrote {path}")
+        update_section(SECTION, text)
+        print(f"wrote {BENCHMARKS_MD}")
 
 
 if __name__ == "__main__":

@@ -22,24 +22,15 @@ import tempfile
 import time
 from pathlib import Path
 
+from _common import update_section
+
 ROOT = Path(__file__).resolve().parents[1]
 SECTION = "## Report"
 
 
 def update_benchmarks_md(body: str, path: Path = ROOT / "BENCHMARKS.md") -> None:
-    """Replace (or append) only the ``## Report`` section of ``path``."""
-    text = path.read_text() if path.exists() else "# grfguard benchmarks\n"
-    lines = text.splitlines()
-    start = next((i for i, ln in enumerate(lines) if ln.strip() == SECTION), None)
-    new = [SECTION, "", *body.strip().splitlines(), ""]
-    if start is None:
-        lines += ["", *new]
-    else:
-        end = next(
-            (i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines)
-        )
-        lines[start:end] = new
-    path.write_text("\n".join(lines).rstrip() + "\n")
+    """Replace (or append) only this script's section of ``path``."""
+    update_section(SECTION, body, path)
 
 
 def main() -> int:

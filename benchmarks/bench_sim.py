@@ -16,12 +16,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import platform  # noqa: E402
-import re  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
+from _common import SMALL, update_section  # noqa: E402
 
 from grfguard.model.robot import SURALP, RobotConfig  # noqa: E402
 from grfguard.sim import GaitConfig, NoiseConfig, simulate  # noqa: E402
@@ -30,10 +30,6 @@ from grfguard.sim.simulate import _log_columns, run_physics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SECTION = "## Simulation speed"
-SMALL = RobotConfig(
-    name="small", mass=60.0, foot_length=0.20, foot_width=0.12, upper_leg_length=0.22,
-    lower_leg_length=0.21, sole_to_ankle=0.09, hip_width=0.16,
-)
 
 
 def _best(fn, repeat: int) -> tuple[float, float, object]:
@@ -72,15 +68,8 @@ def table(rows: list[tuple[str, float, dict[str, float]]]) -> str:
 
 
 def update_benchmarks_md(body: str, path: Path = ROOT / "BENCHMARKS.md") -> None:
-    """Replace (or append) only the ``## Simulation speed`` section of ``path``."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    block = f"{SECTION}\n\n{body.strip()}\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(text):
-        text = pattern.sub(lambda _m: block + "\n", text, count=1)
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    path.write_text(text.rstrip("\n") + "\n")
+    """Replace (or append) only this script's section of ``path``."""
+    update_section(SECTION, body, path)
 
 
 def main() -> None:

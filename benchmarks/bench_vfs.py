@@ -18,12 +18,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import re  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from _common import SMALL, update_section  # noqa: E402
 
 from grfguard.estimate.vfs import VFSConfig, VirtualForceSensor  # noqa: E402
 from grfguard.evaluate.vfs_metrics import evaluate_vfs  # noqa: E402
@@ -32,10 +32,6 @@ from grfguard.sim import GaitConfig, NoiseConfig, simulate  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 SECTION = "## Virtual force sensor"
-SMALL = RobotConfig(
-    name="small", mass=60.0, foot_length=0.20, foot_width=0.12, upper_leg_length=0.22,
-    lower_leg_length=0.21, sole_to_ankle=0.09, hip_width=0.16,
-)
 
 METHODS: list[tuple[str, VFSConfig]] = [
     ("default (multibody + accelerometer, 8-corner QP, w=1e-6)", VFSConfig()),
@@ -136,15 +132,8 @@ def speed(d: float) -> str:
 
 
 def write_section(body: str) -> None:
-    path = ROOT / "BENCHMARKS.md"
-    text = path.read_text() if path.exists() else "# grfguard benchmarks\n"
-    block = f"{SECTION}\n\n{body.strip()}\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(text):
-        text = pattern.sub(lambda _m: block + "\n", text, count=1)
-    else:
-        text = text.rstrip("\n") + "\n\n" + block
-    path.write_text(text.rstrip("\n") + "\n")
+    """Replace (or append) only this script's section of BENCHMARKS.md."""
+    update_section(SECTION, body)
 
 
 def main() -> None:

@@ -42,15 +42,13 @@ def walk_with_vfs(step_length: float, step_period: float, seed: int, duration: f
     if cache is not None and (cache / f"{name}.pkl").is_file():
         return pd.read_pickle(cache / f"{name}.pkl")
     from grfguard.estimate.config import VFSConfig
-    from grfguard.estimate.vfs import VirtualForceSensor
+    from grfguard.estimate.vfs import with_vfs_columns
     from grfguard.sim import GaitConfig, simulate
 
     log = simulate(gait=GaitConfig(step_length=step_length, step_period=step_period,
                                    duration=duration), seed=seed)
     vfs_cfg = VFSConfig.paper() if vfs_method == "paper" else VFSConfig()
-    vfs = VirtualForceSensor.for_log(log, vfs_cfg).run(log)
-    df = pd.concat([log, vfs[[c for c in vfs.columns if c not in log.columns]]], axis=1)
-    df.attrs = log.attrs
+    df = with_vfs_columns(log, vfs_cfg)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         df.to_pickle(cache / f"{name}.pkl")

@@ -12,20 +12,10 @@ import pandas as pd
 import pytest
 
 from grfguard.detect.monitor import Monitor
+from grfguard.estimate.vfs import with_vfs_columns
 from grfguard.evaluate.detection import evaluate_detection
 from grfguard.faults import inject_faults
 from grfguard.model.robot import SENSOR_NAMES
-
-
-def with_vfs(log: pd.DataFrame) -> pd.DataFrame:
-    from grfguard.estimate.vfs import VirtualForceSensor
-
-    out = log.copy()
-    out.attrs = dict(log.attrs)
-    vfs = VirtualForceSensor.for_log(log).run(log)
-    for c in vfs.columns:
-        out[c] = vfs[c].to_numpy()
-    return out
 
 
 @pytest.fixture(scope="module", params=["default", "fast", "slow", "small_robot"])
@@ -34,7 +24,7 @@ def free_walk(request) -> pd.DataFrame:
             "small_robot": "small_robot_walk"}[request.param]
     log = request.getfixturevalue(name)
     # 20 s of each (the VFS dominates the cost); 10 min in benchmarks/bench_monitor.py
-    return with_vfs(log.iloc[:20000])
+    return with_vfs_columns(log.iloc[:20000])
 
 
 def test_fault_free_walk_zero_alarms(free_walk: pd.DataFrame) -> None:
@@ -61,7 +51,7 @@ def test_ten_minutes_fault_free_zero_alarms() -> None:
 
     for sl, sp in ((0.12, 1.0), (0.15, 0.8), (0.08, 1.2)):
         for seed in (1, 2):
-            log = with_vfs(simulate(gait=GaitConfig(step_length=sl, step_period=sp,
+            log = with_vfs_columns(simulate(gait=GaitConfig(step_length=sl, step_period=sp,
                                                     duration=100.0), seed=seed))
             res = Monitor.for_log(log).run(log)
             flags = res[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy()

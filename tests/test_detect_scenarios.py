@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from grfguard.detect.monitor import Monitor, MonitorConfig
+from grfguard.estimate.vfs import with_vfs_columns
 from grfguard.evaluate.detection import evaluate_detection
 from grfguard.faults import inject_faults
 from grfguard.model.robot import SENSOR_NAMES
@@ -22,15 +23,6 @@ from grfguard.model.robot import SENSOR_NAMES
 ONSET = 5.0
 
 
-def with_vfs(log: pd.DataFrame) -> pd.DataFrame:
-    from grfguard.estimate.vfs import VirtualForceSensor
-
-    out = log.copy()
-    out.attrs = dict(log.attrs)
-    vfs = VirtualForceSensor.for_log(log).run(log)
-    for c in vfs.columns:
-        out[c] = vfs[c].to_numpy()
-    return out
 
 
 def paper_faults(side: str) -> list[str]:
@@ -42,7 +34,7 @@ def paper_faults(side: str) -> list[str]:
 def walk(default_walk: pd.DataFrame) -> pd.DataFrame:
     """The first 20 s of the 60 s default walk with its VFS (the full 60 s run is in
     benchmarks/bench_monitor.py); the faults are permanent from 5 s to the end."""
-    return with_vfs(default_walk.iloc[:20000])
+    return with_vfs_columns(default_walk.iloc[:20000])
 
 
 @pytest.fixture(scope="module")

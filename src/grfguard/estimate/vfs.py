@@ -83,7 +83,7 @@ from grfguard.io.schema import (
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
 
-__all__ = ["VFSConfig", "VirtualForceSensor", "VFS_OUTPUT_COLUMNS"]
+__all__ = ["VFSConfig", "VirtualForceSensor", "VFS_OUTPUT_COLUMNS", "with_vfs_columns"]
 
 _CORNER_COLS = tuple(vfs_col(s) for s in SENSOR_NAMES)
 #: Every column :meth:`VirtualForceSensor.run` returns, in order.
@@ -570,3 +570,25 @@ class VirtualForceSensor:
         self._last = {k: float(result[k][idx[-1]]) for k in VFS_OUTPUT_COLUMNS}
         self._last["vfs_valid"] = 1.0
         return pd.DataFrame(result, index=log.index)
+
+
+def with_vfs_columns(log: pd.DataFrame, config: VFSConfig | None = None) -> pd.DataFrame:
+    """``log`` plus the virtual sensor's output columns (metadata kept).
+
+    A :class:`~grfguard.detect.monitor.Monitor` given such a log reuses the columns
+    instead of running the virtual sensor again (handy when several fault scenarios are
+    injected into one walk: the default virtual sensor does not read the force sensors).
+
+    Args:
+        log: A log of the contract.
+        config: Virtual sensor settings (default :class:`VFSConfig`).
+
+    Returns:
+        A new DataFrame; existing columns of the same name are replaced.
+    """
+    out = log.copy()
+    out.attrs = dict(log.attrs)
+    vfs = VirtualForceSensor.for_log(log, config).run(log)
+    for c in vfs.columns:
+        out[c] = vfs[c].to_numpy()
+    return out

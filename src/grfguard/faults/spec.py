@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from grfguard.errors import FaultSpecError
+from grfguard.io.schema import FAULT_KINDS
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = [
@@ -43,17 +44,7 @@ __all__ = [
 ]
 
 #: Injectable fault kinds (``none`` and ``unknown`` are classification outputs only).
-FAULT_KIND_NAMES: tuple[str, ...] = (
-    "offset",
-    "drift",
-    "frozen",
-    "stuck",
-    "gain",
-    "noise",
-    "spikes",
-    "dropout",
-    "saturation",
-)
+FAULT_KIND_NAMES: tuple[str, ...] = tuple(k for k in FAULT_KINDS if k not in ("none", "unknown"))
 _VALUE_REQUIRED = {"offset", "drift", "gain", "noise", "spikes", "saturation"}
 _VALUE_FORBIDDEN = {"stuck", "dropout"}
 _DEFAULT_VALUE = {"frozen": 0.0, "stuck": 0.0, "dropout": 0.0}

@@ -1,0 +1,35 @@
+"""Shared pieces of the benchmark scripts (run them from the repository root)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from grfguard.model.robot import RobotConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS_MD = ROOT / "BENCHMARKS.md"
+
+#: The "other size" robot of the foundation issue: 60 kg, 0.20 x 0.12 m feet, shorter legs.
+SMALL = RobotConfig(
+    name="small", mass=60.0, foot_length=0.20, foot_width=0.12, upper_leg_length=0.22,
+    lower_leg_length=0.21, sole_to_ankle=0.09, hip_width=0.16,
+)
+
+
+def update_section(section: str, body: str, path: Path = BENCHMARKS_MD) -> None:
+    """Replace (or append) only ``section`` (a ``## ...`` heading) of ``path``.
+
+    ``body`` may or may not start with the heading itself.
+    """
+    body = body.strip()
+    if body.startswith(section):
+        body = body[len(section):].strip()
+    text = path.read_text() if path.exists() else "# grfguard benchmarks\n"
+    block = f"{section}\n\n{body}\n"
+    pattern = re.compile(rf"^{re.escape(section)}\n.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(text):
+        text = pattern.sub(lambda _m: block + "\n", text, count=1)
+    else:
+        text = text.rstrip("\n") + "\n\n" + block
+    path.write_text(text.rstrip("\n") + "\n")
