@@ -78,28 +78,35 @@ def _common_checks(side: str, res: pd.DataFrame, tab: pd.DataFrame) -> None:
     assert tab["false_alarms"].sum() == 0
 
 
+def _next_loaded(res: pd.DataFrame, sensor: str, t0: float) -> float:
+    """First time >= t0 at which ``sensor``'s corner carries load (truth) [s]."""
+    t = res["time"].to_numpy()
+    idx = np.flatnonzero((t >= t0) & (res[f"true_force_{sensor}"].to_numpy() > 1.0))
+    return float(t[idx[0]])
+
+
+def test_paper_scenario_right_foot(runs) -> None:
+    """The issue's bounds; the right foot has the prototype's timing (swing 5.2-6.0 s)."""
+    res, tab = runs["r_default"]
+    _common_checks("r", res, tab)
+    d = tab["delay_s"]
+    assert d["r2"] <= 0.5 and d["r4"] <= 0.5
+    assert d["r3"] <= 1.0
+    # frozen at 0: within 0.2 s of the foot being (next) loaded
+    assert ONSET + d["r1"] - _next_loaded(res, "r1", ONSET) <= 0.2
+
+
 def test_mirror_scenario_left_foot(runs) -> None:
+    """The left foot lands at the onset: the unfavourable phase for the drift."""
     res, tab = runs["l_default"]
     _common_checks("l", res, tab)
     d = tab["delay_s"]
     assert d["l2"] <= 0.5 and d["l4"] <= 0.5
-    assert d["l3"] <= 1.0
-    # the left foot is loaded at the onset (double support): frozen within 0.2 s
-    assert d["l1"] <= 0.2
-
-
-def test_paper_scenario_right_foot(runs) -> None:
-    res, tab = runs["r_default"]
-    _common_checks("r", res, tab)
-    d = tab["delay_s"]
-    # frozen: the right foot is loaded from the onset on (touchdown at 5.0 s)
-    assert d["r1"] <= 0.2
-    # offsets: per-corner residuals in clean single support (from 5.32 s)
-    assert d["r2"] <= 0.5 and d["r4"] <= 0.5
-    # The drift (15 N/s) is below the corner noise until the foot swings again (the
-    # foot-total test is blind while r1 carries no information): detected at the start
-    # of the next swing window, 6.32 s. The mirror scenario meets the 1 s bound.
-    assert d["r3"] <= 1.5
+    assert ONSET + d["l1"] - _next_loaded(res, "l1", ONSET) <= 0.2
+    # The drift (15 N/s) stays below the per-corner VFS error in this single support
+    # and the foot-total test is blind while l1 carries no information: it is caught
+    # at the start of the next swing window (benchmarks/bench_onset_phase.py).
+    assert d["l3"] <= 1.5
 
 
 def test_paper_method_same_runs_reported(runs) -> None:

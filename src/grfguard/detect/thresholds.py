@@ -69,7 +69,7 @@ class Thresholds:
     corner_kappa: float = 3.0
     corner_h: float = 30.0
     const_samples: int = 25
-    paper_eta_n: tuple[float, ...] = (15.2, 20.6, 24.1, 19.4, 48.6, 26.3, 29.3, 31.0)
+    paper_eta_n: tuple[float, ...] = (24.4, 39.3, 35.6, 32.0, 29.8, 15.8, 22.8, 19.4)
     false_alarm_rate_per_hour: float = 0.1
     source: str = "builtin"
 

@@ -44,8 +44,10 @@ class GaitConfig:
     support foot) followed by single support (the other foot swings); the first and
     the last step move the swing foot by one ``step_length``, the others by two (foot
     placements advance by ``step_length``); after the last step the ZMP returns to the
-    middle of the feet and the robot stands until ``duration``. The right foot
-    supports first (the left foot swings first).
+    middle of the feet and the robot stands until ``duration``. ``first_swing`` says
+    which foot makes the first step; the default, the right foot, gives the faulty
+    foot of the paper's scenario the timing of the prototype in DESIGN.md (onset at
+    5 s late in its stance, swing from about 5.2 s).
 
     Attributes:
         step_length: Forward distance between consecutive footprints in [m].
@@ -68,6 +70,7 @@ class GaitConfig:
         torque_feedforward: Add inverse-dynamics torques of the planned motion to the
             position servos (removes the stance-leg sag and the tracking lag of an
             open-loop walk).
+        first_swing: The foot that makes the first step, ``r`` or ``l``.
     """
 
     step_length: float = 0.12
@@ -83,6 +86,7 @@ class GaitConfig:
     com_iterations: int = 3
     zmp_passes: int = 1
     torque_feedforward: bool = True
+    first_swing: str = "r"
 
     def __post_init__(self) -> None:
         o = "gait"
@@ -105,6 +109,11 @@ class GaitConfig:
         if not isinstance(self.zmp_passes, int) or not 0 <= self.zmp_passes <= 5:
             raise ConfigError(
                 f"gait.zmp_passes = {self.zmp_passes!r} must be an integer in [0, 5]"
+            )
+        if self.first_swing not in ("r", "l"):
+            raise ConfigError(
+                f"gait.first_swing = {self.first_swing!r} must be 'r' or 'l' (the foot that "
+                "makes the first step)"
             )
         if not isinstance(self.torque_feedforward, bool):
             raise ConfigError(

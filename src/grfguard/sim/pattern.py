@@ -284,8 +284,9 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     footsteps[0, :, 1] = -half_w
     footsteps[1, :, 1] = half_w
     swing = np.empty(n, dtype=int)  # index of the swinging foot in each step (1-based j)
+    first = 0 if gait.first_swing == "r" else 1
     for j in range(1, n + 1):
-        sw = 1 if j % 2 == 1 else 0  # left swings first
+        sw = first if j % 2 == 1 else 1 - first  # the feet alternate from first_swing
         swing[j - 1] = sw
         footsteps[:, j, 0] = footsteps[:, j - 1, 0]
         footsteps[sw, j, 0] = (j - 1) * L if j == n else j * L
