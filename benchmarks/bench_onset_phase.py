@@ -56,24 +56,25 @@ def main() -> None:
         part.attrs = walk.attrs
         log = inject_faults(part, [f"{f}@{onset:g}" for f in FAULTS], seed=0)
         loaded = first_loaded_after(part, "r", onset)
-        for method in ("default", "paper"):
+        for method, label in (("default", "default"), ("paper", "paper observer")):
             res = Monitor.for_log(log, MonitorConfig().with_method(method)).run(log)
             tab = evaluate_detection(res)
             cells = []
             for s in ("r1", "r2", "r3", "r4"):
                 d = tab.loc[s, "delay_s"]
-                delays.setdefault((method, s), []).append(float(d))
+                delays.setdefault((label, s), []).append(float(d))
                 ok = "" if method != "default" or tab.loc[s, "kind_correct"] is True else "*"
                 cells.append("missed" if not np.isfinite(d) else f"{d:.2f}{ok}")
             fa = int(tab["false_alarms"].sum())
             r1_after_load = tab.loc["r1", "delay_s"] + onset - loaded
-            rows.append(f"| {onset:.2f} | {loaded - onset:.2f} | {method} | "
+            rows.append(f"| {onset:.2f} | {loaded - onset:.2f} | {label} | "
                         + " | ".join(cells)
                         + f" | {r1_after_load:.2f} | {fa} |")
     lines = [
         "Command: `.venv/bin/python benchmarks/bench_onset_phase.py` (60 s default walk, "
-        "seed 0, the paper's four right-foot faults at each onset; both methods on the "
-        "default virtual sensor; * = kind misclassified). 'loaded' = first time after the "
+        "seed 0, the paper's four right-foot faults at each onset; the default detector and "
+        "the paper's observer, both on the default virtual sensor; * = kind misclassified). "
+        "'loaded' = first time after the "
         "onset with all four right corners carrying load (truth) minus the onset; "
         "'r1 after load' = r1's detection time minus that instant.",
         "",
