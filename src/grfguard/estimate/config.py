@@ -13,8 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from grfguard._validate import check_number
 from grfguard.errors import ConfigError
 
 __all__ = ["VFSConfig", "COM_METHODS", "SPLIT_METHODS"]
@@ -26,13 +25,7 @@ SPLIT_METHODS: tuple[str, ...] = ("qp", "paper")
 
 
 def _num(name: str, value: Any, lo: float, hi: float, unit: str) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool):
-        raise ConfigError(f"vfs.{name} must be a number, got {value!r}")
-    if not np.isfinite(value) or not (lo <= value <= hi):
-        raise ConfigError(
-            f"vfs.{name} = {value!r} {unit} is outside the allowed range [{lo}, {hi}] {unit}; "
-            "fix it in the [vfs] table of the config"
-        )
+    check_number("vfs", name, value, lo, hi, unit, "fix it in the [vfs] table of the config")
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from grfguard._validate import check_number
 from grfguard.errors import ConfigError
 
 __all__ = [
@@ -56,13 +57,8 @@ SENSOR_NAMES: tuple[str, ...] = sensor_names(4)
 
 
 def _check_range(name: str, value: float, lo: float, hi: float, unit: str) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool):
-        raise ConfigError(f"robot.{name} must be a number, got {value!r}")
-    if not np.isfinite(value) or not (lo <= value <= hi):
-        raise ConfigError(
-            f"robot.{name} = {value!r} {unit} is outside the allowed range "
-            f"[{lo}, {hi}] {unit}; edit the robot TOML (see `grfguard robot show`)"
-        )
+    check_number("robot", name, value, lo, hi, unit,
+                 "edit the robot TOML (see `grfguard robot show`)")
 
 
 @dataclass(frozen=True)

@@ -13,18 +13,14 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from grfguard._validate import check_number
 from grfguard.errors import ConfigError
 
 __all__ = ["GaitConfig", "NoiseConfig"]
 
 
 def _num(owner: str, name: str, value: Any, lo: float, hi: float, unit: str) -> None:
-    if not isinstance(value, (int, float)) or isinstance(value, bool):
-        raise ConfigError(f"{owner}.{name} must be a number, got {value!r}")
-    if not math.isfinite(value) or not (lo <= value <= hi):
-        raise ConfigError(
-            f"{owner}.{name} = {value!r} {unit} is outside the allowed range [{lo}, {hi}] {unit}"
-        )
+    check_number(owner, name, value, lo, hi, unit)
 
 
 def _from_dict(cls, data: dict[str, Any], owner: str):
