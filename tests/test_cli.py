@@ -71,6 +71,9 @@ def test_inject_run_evaluate_report(short_walk, tmp_path) -> None:
     out = tmp_path / "out.parquet"
     res = runner.invoke(app, ["run", str(faulty), "-o", str(out)])
     assert res.exit_code == 0, res.output
+    meta = load_log(out).attrs  # the run says what produced it
+    assert meta["faults"] == ["l2=offset:100@4"] and meta["monitor"]["method"] == "default"
+    assert meta["monitor"]["thresholds"]["swing_h"] > 0
     res = runner.invoke(app, ["evaluate", str(out), "--json"])
     assert res.exit_code == 0, res.output
     import json
@@ -83,7 +86,9 @@ def test_inject_run_evaluate_report(short_walk, tmp_path) -> None:
     html = tmp_path / "report.html"
     res = runner.invoke(app, ["report", str(out), "-o", str(html)])
     assert res.exit_code == 0, res.output
-    assert html.stat().st_size > 1e6 and "l2" in html.read_text()
+    text = html.read_text()
+    assert html.stat().st_size > 1e6 and "l2" in text
+    assert "swing_h" in text and "l2=offset:100@4" in text  # method, thresholds, faults
 
 
 def test_paper_method_uses_the_papers_virtual_sensor(short_walk, tmp_path) -> None:

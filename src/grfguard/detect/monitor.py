@@ -421,7 +421,19 @@ class Monitor:
                 out[c] = vdf[c].to_numpy()
         for c in res.columns:
             out[c] = res[c].to_numpy()
+        out.attrs = {**log.attrs, "monitor": self.describe()}
         return out
+
+    def describe(self) -> dict[str, Any]:
+        """The settings of this run as plain data (goes to the output's metadata)."""
+        c = self.config
+        vfs_cfg = getattr(self.vfs, "config", None) if self.vfs is not None else c.vfs
+        return {
+            "method": c.method,
+            "vfs": vfs_cfg.to_dict() if hasattr(vfs_cfg, "to_dict") else
+            ("precomputed columns" if self.vfs is None else None),
+            "thresholds": c.thresholds.to_dict(),
+        }
 
     # ------------------------------------------------------------------ paper method
     def _paper_init_step(self, x: list[float], v: list[float]) -> None:

@@ -141,4 +141,9 @@ def inject_faults(
             fault = prev_fault
         out[fault_col(s)] = fault
         out[fault_kind_col(s)] = pd.array(kind, dtype=object)
+    out.attrs = {
+        **log.attrs,
+        "faults": [*log.attrs.get("faults", []), *(f.to_spec_string() for f in specs)],
+        "fault_seed": seed,
+    }
     return out
