@@ -1148,6 +1148,34 @@ def _dot_rows(rows: Any, x: tuple[float, ...]) -> list[float]:
     return [sum(a * v for a, v in zip(r, x, strict=True)) for r in rows]
 
 
+def _primal_step(
+    current: list[float], target: list[float], free: list[bool], tol_n: float
+) -> tuple[list[float], bool]:
+    """One step of the primal active-set method (in place on ``free``).
+
+    Moves from the feasible ``current`` toward the equality-constrained optimum ``target``
+    of the free set; if a free point would go negative (below ``-tol_n`` [N]) the step
+    stops at the first such point, which is fixed to zero and leaves the free set.
+
+    Returns:
+        The new point and whether a point was blocked (True: solve again).
+    """
+    n = len(current)
+    alpha, blk = 1.0, -1
+    for i in range(n):
+        if free[i] and target[i] < -tol_n:
+            a_i = current[i] / (current[i] - target[i])
+            if a_i < alpha:
+                alpha, blk = a_i, i
+    if blk < 0:
+        return current, False
+    moved = [current[i] + alpha * (target[i] - current[i]) if free[i] else 0.0
+             for i in range(n)]
+    moved[blk] = 0.0
+    free[blk] = False
+    return moved, True
+
+
 class DistributionSolver:
     r"""Per-sample solver for fixed contact points (one foot in its sole frame), 1 kHz.
 
@@ -1275,17 +1303,8 @@ class DistributionSolver:
                 break
             R, L = entry
             V = _dot_rows(R, x)
-            alpha = 1.0
-            blk = -1
-            for i in range(n):
-                if free[i] and V[i] < -tol_n:
-                    a_i = N[i] / (N[i] - V[i])
-                    if a_i < alpha:
-                        alpha, blk = a_i, i
-            if blk >= 0:
-                N = [N[i] + alpha * (V[i] - N[i]) if free[i] else 0.0 for i in range(n)]
-                N[blk] = 0.0
-                free[blk] = False
+            N, blocked = _primal_step(N, V, free, tol_n)
+            if blocked:
                 continue
             # multiplier scale of this candidate: w s_N + |p| |d - C N| + |λ|
             cx = x[0]
@@ -1481,16 +1500,8 @@ def solve_distribution_one(
                         Ncur[i] = bc[j] / tot
         for _ in range(4 * n + 4):
             N, lam, mu = _evaluate_one(px, py, w, Gl, free, kept, x)
-            alpha, blk = 1.0, -1
-            for i in range(n):
-                if free[i] and N[i] < -_TOL * s_n:
-                    a_i = Ncur[i] / (Ncur[i] - N[i])
-                    if a_i < alpha:
-                        alpha, blk = a_i, i
-            if blk >= 0:
-                Ncur = [Ncur[i] + alpha * (N[i] - Ncur[i]) if free[i] else 0.0 for i in range(n)]
-                Ncur[blk] = 0.0
-                free[blk] = False
+            Ncur, blocked = _primal_step(Ncur, N, free, _TOL * s_n)
+            if blocked:
                 continue
             Ncur = [N[i] if free[i] and N[i] > 0.0 else 0.0 for i in range(n)]
             smu = mu_scale(Ncur, lam)
