@@ -90,3 +90,17 @@ def test_threshold_for_rate_exponential_tail() -> None:
     assert threshold_for_rate([], 1.0, 1.0, floor=3.0) == 3.0
     stat = np.array([0, 1, 2, 0, 0, 5, 1, 0, 3])
     assert excursion_peaks(stat).tolist() == [2, 5, 3]
+
+
+def test_scalar_cusum_step_matches_the_streaming_detector() -> None:
+    from grfguard.detect.blocks import Cusum, cusum_step
+
+    rng = np.random.default_rng(7)
+    z = rng.normal(2.0, 2.0, 500)
+    det = Cusum(kappa=1.0, h=1e9)
+    gp = gn = 0.0
+    for zi in z:
+        det.update(zi)
+        gp, gn = cusum_step(gp, gn, float(zi), 1.0)
+        assert gp == pytest.approx(float(det.g_pos)) and gn == pytest.approx(float(det.g_neg))
+    assert gp > 100.0  # the 2 σ mean shift (above κ = 1) has accumulated

@@ -253,7 +253,9 @@ def evaluate(
     df = read_log(log)
     result = evaluate_frame(df)
     if as_json:
-        out.print_json(json.dumps(result, default=_json_default))
+        from grfguard.io.logio import to_jsonable
+
+        out.print_json(json.dumps(to_jsonable(result)))
     else:
         _print_evaluation(result)
 
@@ -297,16 +299,6 @@ def detection_metrics(df: Any) -> dict[str, Any]:
     }
     summary = {k: clean(v) for k, v in summarize_detection(table, duration).items()}
     return {"sensors": sensors, "summary": summary}
-
-
-def _json_default(obj: Any) -> Any:
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)
 
 
 def _fmt(v: Any) -> str:

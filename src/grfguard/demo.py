@@ -55,7 +55,7 @@ def run_demo(
     from grfguard.cli import evaluate_frame, monitor_config
     from grfguard.detect.monitor import Monitor
     from grfguard.faults import inject_faults, parse_fault_spec
-    from grfguard.io.logio import write_log
+    from grfguard.io.logio import to_jsonable, write_log
     from grfguard.report.figures import write_png_figures
     from grfguard.report.html import write_html_report
     from grfguard.sim import GaitConfig, NoiseConfig, simulate
@@ -88,7 +88,7 @@ def run_demo(
         results[method] = evaluate_frame(res)
 
     console.print("[bold]4/5[/] writing figures and metrics")
-    (out_dir / "metrics.json").write_text(json.dumps(results, indent=2, default=_json_default))
+    (out_dir / "metrics.json").write_text(json.dumps(to_jsonable(results), indent=2))
     table_md = _metrics_markdown(results)
     (out_dir / "metrics.md").write_text(table_md)
     pngs = write_png_figures(
@@ -131,16 +131,14 @@ def plot_corner_forces(log: Any, t_max: float = 6.0) -> tuple[Any, Any]:
     Returns:
         ``(fig, axes)``: one row per foot.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     from grfguard.model.robot import SIDES
 
     sel = log["time"] <= t_max
     t = log["time"][sel]
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
+    fig = Figure(figsize=(10, 6), layout="constrained")
+    axes = fig.subplots(2, 1, sharex=True)
     for ax, side in zip(axes, SIDES, strict=True):
         for k, colour in zip(range(1, 5), ("C0", "C1", "C2", "C3"), strict=True):
             s = f"{side}{k}"
@@ -155,14 +153,6 @@ def plot_corner_forces(log: Any, t_max: float = 6.0) -> tuple[Any, Any]:
     axes[-1].set_xlabel("time [s]")
     fig.suptitle("Sole sensor forces of the simulated walk")
     return fig, axes
-
-
-def _json_default(obj: Any) -> Any:
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return str(obj)
 
 
 _DET_KEYS = (

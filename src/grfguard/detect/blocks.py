@@ -28,6 +28,7 @@ __all__ = [
     "CusumResult",
     "cusum",
     "Cusum",
+    "cusum_step",
     "robust_scale",
     "hysteresis",
     "PersistentFlag",
@@ -89,6 +90,23 @@ def cusum(
         gp[i] = det.g_pos
         gn[i] = det.g_neg
     return CusumResult(gp, gn, al)
+
+
+def cusum_step(g_pos: float, g_neg: float, z: float, kappa: float) -> tuple[float, float]:
+    """One scalar step of the two-sided CUSUM (plain floats, for the 1 kHz loop).
+
+    Args:
+        g_pos: Upper sum before the sample [σ·samples].
+        g_neg: Lower sum before the sample [σ·samples].
+        z: Normalised residual of the sample [σ].
+        kappa: Drift allowance [σ].
+
+    Returns:
+        The new ``(g_pos, g_neg)``, both >= 0.
+    """
+    gp = g_pos + z - kappa
+    gn = g_neg - z - kappa
+    return (gp if gp > 0.0 else 0.0), (gn if gn > 0.0 else 0.0)
 
 
 class Cusum:

@@ -52,7 +52,7 @@ import numpy as np
 import pandas as pd
 
 from grfguard.detect.blocks import cusum as cusum_batch
-from grfguard.detect.blocks import excursion_peaks, robust_scale, threshold_for_rate
+from grfguard.detect.blocks import cusum_step, excursion_peaks, robust_scale, threshold_for_rate
 from grfguard.detect.observer import FaultObserver, ObserverConfig
 from grfguard.detect.thresholds import Thresholds, default_thresholds
 from grfguard.errors import ConfigError, LogFormatError
@@ -651,10 +651,7 @@ class Monitor:
             if swing_ok[f]:
                 z = xi / sig
                 res_sw[i] = xi
-                gp = s.gp + z - th.swing_kappa
-                gn = s.gn - z - th.swing_kappa
-                s.gp = gp if gp > 0.0 else 0.0
-                s.gn = gn if gn > 0.0 else 0.0
+                s.gp, s.gn = cusum_step(s.gp, s.gn, z, th.swing_kappa)
                 stat_sw[i] = max(s.gp, s.gn)
                 if stat_sw[i] > th.swing_h:
                     s.gp = s.gn = 0.0
@@ -671,10 +668,7 @@ class Monitor:
                 r = (corr - v[i]) / weight
                 res_c[i] = r
                 z = r / th.corner_sigma
-                cp = s.cp + z - th.corner_kappa
-                cn = s.cn - z - th.corner_kappa
-                s.cp = cp if cp > 0.0 else 0.0
-                s.cn = cn if cn > 0.0 else 0.0
+                s.cp, s.cn = cusum_step(s.cp, s.cn, z, th.corner_kappa)
                 stat_c[i] = max(s.cp, s.cn)
                 if stat_c[i] > th.corner_h:
                     s.cp = s.cn = 0.0
@@ -713,10 +707,7 @@ class Monitor:
             r = (math.fsum(corr) - tot[f]) / weight
             res_t[f] = r
             z = r / th.total_sigma
-            gp = self._tp[f] + z - th.total_kappa
-            gn = self._tn[f] - z - th.total_kappa
-            self._tp[f] = gp if gp > 0.0 else 0.0
-            self._tn[f] = gn if gn > 0.0 else 0.0
+            self._tp[f], self._tn[f] = cusum_step(self._tp[f], self._tn[f], z, th.total_kappa)
             stat_t[f] = max(self._tp[f], self._tn[f])
             sgn = 1.0 if z > 0 else -1.0
             # health evidence for stance-flagged sensors of this foot: a quiet residual

@@ -8,6 +8,7 @@ A log is a :class:`pandas.DataFrame` with one row per sample (the contract in
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -19,25 +20,29 @@ import pandas as pd
 from grfguard.errors import LogFormatError
 from grfguard.io.schema import REQUIRED_INPUT_COLUMNS, TIME
 
-__all__ = ["read_log", "write_log", "load_log", "validate_log", "METADATA_KEY"]
+__all__ = ["read_log", "write_log", "load_log", "validate_log", "to_jsonable", "METADATA_KEY"]
 
 #: Parquet schema metadata key holding the JSON metadata.
 METADATA_KEY = b"grfguard"
 _CSV_PREFIX = "# grfguard:"
 
 
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
+def to_jsonable(value: Any) -> Any:
+    """``value`` as plain JSON data: mappings, sequences, numpy scalars and arrays and
+    dataclasses converted; anything else unknown becomes its ``str``."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return to_jsonable(dataclasses.asdict(value))
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    return str(value)
 
 
 def write_log(df: pd.DataFrame, path: str | Path) -> Path:
@@ -55,7 +60,7 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    meta = json.dumps(_jsonable(dict(df.attrs)), sort_keys=True)
+    meta = json.dumps(to_jsonable(dict(df.attrs)), sort_keys=True)
     if path.suffix.lower() == ".csv":
         with path.open("w", newline="") as fh:
             fh.write(f"{_CSV_PREFIX} {meta}\n")

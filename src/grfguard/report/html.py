@@ -25,7 +25,6 @@ draw; when every figure is drawn the page sets ``window.grfguardReport.ready = t
 from __future__ import annotations
 
 import base64
-import dataclasses
 import html as _html
 import json
 import math
@@ -37,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
+from grfguard.io.logio import to_jsonable
 from grfguard.report._decimate import minmax_indices, step_edges, window_mask
 from grfguard.report.style import (
     ALARM_COLOR,
@@ -488,22 +488,6 @@ def _summary_html(summary: pd.DataFrame, thresholds: Any) -> str:
     )
 
 
-def _jsonable(value: Any) -> Any:
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return _jsonable(dataclasses.asdict(value))
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, (str, int, float, bool)) or value is None:
-        return value
-    return str(value)
-
-
 def _value_html(v: Any, depth: int = 0) -> str:
     """Compact HTML of a metadata value: dicts as flowing key/value chips, lists inline."""
     if isinstance(v, dict):
@@ -527,7 +511,7 @@ def _value_html(v: Any, depth: int = 0) -> str:
 
 
 def _run_name(df: pd.DataFrame) -> str:
-    robot = _jsonable(df.attrs.get("robot", "run"))
+    robot = to_jsonable(df.attrs.get("robot", "run"))
     if isinstance(robot, dict):
         robot = robot.get("name", "run")
     return str(robot)
@@ -556,7 +540,7 @@ def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
         (str(k) for k in df.attrs if k not in preferred), key=str
     )
     for k in keys:
-        rows.append((k, _value_html(_jsonable(df.attrs[k]))))
+        rows.append((k, _value_html(to_jsonable(df.attrs[k]))))
     return (
         "<table class='meta' id='metadata'>"
         + "".join(f"<tr><th>{_html.escape(k)}</th><td>{v}</td></tr>" for k, v in rows)
