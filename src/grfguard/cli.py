@@ -192,41 +192,6 @@ def run(
     console.print(f"wrote {output}: {len(result)} samples")
 
 
-def monitor_config(
-    config: Path | None = None,
-    thresholds: Path | None = None,
-    method: str | None = None,
-    vfs: str | None = None,
-) -> Any:
-    """The monitor configuration the command-line options describe.
-
-    ``method="paper"`` means the paper as published: its observer and, unless ``vfs``
-    or the config file says otherwise, its virtual sensor too.
-    """
-    from grfguard.detect.monitor import MonitorConfig
-    from grfguard.detect.thresholds import default_thresholds, paper_vfs_thresholds
-    from grfguard.errors import ConfigError
-    from grfguard.estimate.config import VFSConfig
-
-    cfg = MonitorConfig.from_toml(config) if config is not None else MonitorConfig()
-    if method is not None:
-        cfg = cfg.with_method(method)
-    if vfs is None and method == "paper" and cfg.vfs is None:
-        vfs = "paper"
-    if vfs == "paper":
-        cfg = cfg.replace(vfs=VFSConfig.paper())
-        if thresholds is None and cfg.thresholds == default_thresholds():
-            # the paper's eq. 33 thresholds come from fault-free runs of its own pipeline
-            cfg = cfg.with_thresholds(paper_vfs_thresholds())
-    elif vfs == "default":
-        cfg = cfg.replace(vfs=VFSConfig())
-    elif vfs is not None:
-        raise ConfigError(f"--vfs must be 'default' or 'paper', got {vfs!r}")
-    if thresholds is not None:
-        cfg = cfg.with_thresholds(thresholds)
-    return cfg
-
-
 def _run_monitor(
     df: Any,
     config: Path | None,
@@ -234,6 +199,7 @@ def _run_monitor(
     method: str | None,
     vfs: str | None = None,
 ) -> Any:
+    from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
@@ -248,6 +214,7 @@ def evaluate(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
     """Accuracy of the virtual sensor and of detection against the truth columns."""
+    from grfguard.evaluate.frame import evaluate_frame
     from grfguard.io.logio import read_log
 
     df = read_log(log)
@@ -258,47 +225,6 @@ def evaluate(
         out.print_json(json.dumps(to_jsonable(result)))
     else:
         _print_evaluation(result)
-
-
-def evaluate_frame(df: Any) -> dict[str, Any]:
-    """All metrics the truth in ``df`` allows (VFS accuracy, detection)."""
-    from grfguard.errors import LogFormatError
-
-    result: dict[str, Any] = {"source": df.attrs.get("source")}
-    if "vfs_r1" not in df.columns:
-        raise LogFormatError(
-            "the log has no vfs_* columns: evaluate the output of `grfguard run`, not its input"
-        )
-    if "true_force_r1" in df.columns:
-        from grfguard.evaluate.vfs_metrics import evaluate_vfs
-
-        result["vfs"] = evaluate_vfs(df)
-    if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        result["detection"] = detection_metrics(df)
-    return result
-
-
-def detection_metrics(df: Any) -> dict[str, Any]:
-    """Per-sensor detection metrics and their summary, as plain JSON-able dicts."""
-    import math
-
-    from grfguard.evaluate.detection import evaluate_detection, summarize_detection
-
-    table = evaluate_detection(df)
-    duration = float(df["time"].iloc[-1] - df["time"].iloc[0])
-
-    def clean(v: Any) -> Any:
-        if hasattr(v, "item"):
-            v = v.item()
-        if isinstance(v, float) and math.isnan(v):
-            return None
-        return v
-
-    sensors = {
-        str(s): {k: clean(v) for k, v in row.items()} for s, row in table.iterrows()
-    }
-    summary = {k: clean(v) for k, v in summarize_detection(table, duration).items()}
-    return {"sensors": sensors, "summary": summary}
 
 
 def _fmt(v: Any) -> str:
@@ -383,9 +309,9 @@ def report(
 
 
 def _detection_metrics_or_none(df: Any) -> Any:
-    if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        return detection_metrics(df)["sensors"]
-    return None
+    from grfguard.evaluate.frame import detection_metrics, has_detection_truth
+
+    return detection_metrics(df)["sensors"] if has_detection_truth(df) else None
 
 
 # ------------------------------------------------------------------------------ demo
@@ -400,6 +326,19 @@ def demo(
     from grfguard.demo import run_demo
 
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
+
+
+def __getattr__(name: str) -> Any:
+    """Old import paths: ``grfguard.cli.{monitor_config, evaluate_frame, detection_metrics}``."""
+    if name == "monitor_config":
+        from grfguard.config import monitor_config
+
+        return monitor_config
+    if name in ("evaluate_frame", "detection_metrics"):
+        import grfguard.evaluate.frame as frame
+
+        return getattr(frame, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def main() -> None:
