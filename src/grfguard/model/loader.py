@@ -313,8 +313,8 @@ def _add_servos_and_sensors(spec, desc, joints, kp, mass, leg_len) -> mujoco.MjM
     base = spec.worldbody.first_body().name if desc.base_body is None else desc.base_body
     sensor("truth_com_pos", S.mjSENS_SUBTREECOM, O.mjOBJ_BODY, base)
     sensor("truth_com_vel", S.mjSENS_SUBTREELINVEL, O.mjOBJ_BODY, base)
-    sensor("truth_base_pos", S.mjSENS_FRAMEPOS, O.mjOBJ_BODY, base)
-    sensor("truth_base_quat", S.mjSENS_FRAMEQUAT, O.mjOBJ_BODY, base)
+    sensor("truth_base_pos", S.mjSENS_FRAMEPOS, O.mjOBJ_XBODY, base)
+    sensor("truth_base_quat", S.mjSENS_FRAMEQUAT, O.mjOBJ_XBODY, base)
     for s in SIDES:
         sensor(f"truth_sole_{s}_pos", S.mjSENS_FRAMEPOS, O.mjOBJ_SITE, f"{s}_sole")
         sensor(f"truth_sole_{s}_quat", S.mjSENS_FRAMEQUAT, O.mjOBJ_SITE, f"{s}_sole")
