@@ -27,8 +27,6 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-robot_app = typer.Typer(help="Robot descriptions.", no_args_is_help=True)
-app.add_typer(robot_app, name="robot")
 
 console = Console(stderr=True)
 out = Console()
@@ -61,18 +59,6 @@ def _progress(description: str) -> Progress:
     )
 
 
-# ----------------------------------------------------------------------------- robot
-@robot_app.command("show")
-@_friendly
-def robot_show(
-    robot: Annotated[Path | None, typer.Option(help="Robot TOML to validate and print.")] = None,
-) -> None:
-    """Print the robot description as TOML (the SURALP default: copy and edit it)."""
-    from grfguard.model.robot import load_robot
-
-    sys.stdout.write(load_robot(robot).to_toml())
-
-
 # -------------------------------------------------------------------------- simulate
 @app.command()
 @_friendly
@@ -85,10 +71,21 @@ def simulate(
         float | None, typer.Option(help="Double-support fraction of a step (0-1).")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the sensor noise.")] = 0,
-    robot: Annotated[Path | None, typer.Option(help="Robot TOML (default SURALP).")] = None,
+    robot: Annotated[
+        Path | None, typer.Option(help="suralp (default), talos, g1, or a robot TOML.")
+    ] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
+    rate: Annotated[float, typer.Option(help="Log sample rate [Hz] (divides 1000).")] = 1000.0,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
+    from grfguard.cli_robot import is_described_robot, simulate_described
+
+    if is_described_robot(robot):
+        simulate_described(robot, output, duration, step_length, step_period,
+                           double_support, seed, noise, rate)
+        return
+    if robot is not None and str(robot) == "suralp":
+        robot = None
     from grfguard.io.logio import write_log
     from grfguard.model.robot import load_robot
     from grfguard.sim import GaitConfig, NoiseConfig
@@ -113,6 +110,10 @@ def simulate(
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
         )
+    if rate != 1000.0:
+        from grfguard.sim.wholebody import decimate
+
+        df = decimate(df, rate)
     write_log(df, output)
     console.print(
         f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}"
@@ -339,6 +340,12 @@ def __getattr__(name: str) -> Any:
 
         return getattr(frame, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
+
+app.add_typer(robot_app, name="robot")
+app.command("decimate")(decimate_cmd)
 
 
 def main() -> None:

@@ -199,4 +199,10 @@ def load_log(path: str | Path) -> pd.DataFrame:
     Checks that the input columns of the log contract are present (``time``, IMU,
     joint encoders, force sensors).
     """
-    return read_log(path, required=REQUIRED_INPUT_COLUMNS)
+    from grfguard.io.robot_schema import is_described_log, load_robot_log
+
+    df = read_log(path)
+    if is_described_log(df):  # Talos, G1, ...: columns from the robot description
+        return load_robot_log(path)
+    validate_log(df, required=REQUIRED_INPUT_COLUMNS, where=str(path))
+    return df
