@@ -6,7 +6,6 @@ on bad input are reported in one line saying what to fix, with exit code 2.
 
 from __future__ import annotations
 
-import functools
 import json
 import sys
 from collections.abc import Callable
@@ -18,7 +17,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from grfguard.errors import GrfguardError
+from grfguard._cliutil import ROBOT_HELP, friendly, say
 
 app = typer.Typer(
     name="grfguard",
@@ -33,17 +32,14 @@ out = Console()
 
 
 def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn grfguard errors into one red line and exit code 2."""
+    """Turn grfguard errors into one red line and exit code 2 (user text never read as
+    markup); print grfguard warnings as ``warning:`` lines."""
+    return friendly(console)(fn)
 
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except GrfguardError as exc:
-            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
-            raise typer.Exit(2) from None
 
-    return wrapper
+def _say(message: str) -> None:
+    """One plain-text status line on stderr (paths may contain ``[...]``)."""
+    say(console, message)
 
 
 def _progress(description: str) -> Progress:
@@ -72,26 +68,28 @@ def simulate(
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the sensor noise.")] = 0,
     robot: Annotated[
-        Path | None, typer.Option(help="suralp (default), talos, g1, or a robot TOML.")
+        str | None, typer.Option(help=ROBOT_HELP + " Also talos, g1. Default SURALP.")
     ] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
     rate: Annotated[float, typer.Option(help="Log sample rate [Hz] (divides 1000).")] = 1000.0,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
+    from grfguard._cliutil import check_seed, resolve_robot
     from grfguard.cli_robot import is_described_robot, simulate_described
-
-    if is_described_robot(robot):
-        simulate_described(robot, output, duration, step_length, step_period,
-                           double_support, seed, noise, rate)
-        return
-    if robot is not None and str(robot) == "suralp":
-        robot = None
     from grfguard.io.logio import write_log
-    from grfguard.model.robot import load_robot
+    from grfguard.io.safe import check_output
+    from grfguard.model.robot import SURALP
     from grfguard.sim import GaitConfig, NoiseConfig
     from grfguard.sim import simulate as _simulate
 
-    rob = load_robot(robot)
+    check_seed(seed)
+    if is_described_robot(robot):
+        check_output(output, inputs=[robot], what="log")
+        simulate_described(robot, output, duration, step_length, step_period,
+                           double_support, seed, noise, rate)
+        return
+    rob = resolve_robot(robot) or SURALP
+    check_output(output, inputs=[robot], what="log")
     gait_kw: dict[str, Any] = {"duration": duration}
     if step_length is not None:
         gait_kw["step_length"] = step_length
@@ -115,9 +113,7 @@ def simulate(
 
         df = decimate(df, rate)
     write_log(df, output)
-    console.print(
-        f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}"
-    )
+    _say(f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}")
 
 
 def _noise_config(name: str, cls: Any) -> Any:
@@ -149,19 +145,23 @@ def inject(
     seed: Annotated[int, typer.Option(help="Seed of random fault kinds (noise, spikes).")] = 0,
 ) -> None:
     """Inject sensor faults into a log (writes fault_<s> / fault_kind_<s> truth columns)."""
+    from grfguard._cliutil import check_faults_toml, check_seed
     from grfguard.errors import FaultSpecError
-    from grfguard.faults import inject_faults, load_faults, parse_fault_spec
+    from grfguard.faults import inject_faults, parse_fault_spec
     from grfguard.io.logio import read_log, write_log
+    from grfguard.io.safe import check_output
 
+    check_seed(seed)
     specs = [parse_fault_spec(s) for s in (fault or [])]
     if faults_file is not None:
-        specs.extend(load_faults(faults_file))
+        specs.extend(check_faults_toml(faults_file))
     if not specs:
         raise FaultSpecError("no fault given: use --fault r2=offset:100@5 or --faults FILE.toml")
+    check_output(output, inputs=[log, faults_file], what="faulty log")
     df = read_log(log)
     faulty = inject_faults(df, specs, seed=seed)
     write_log(faulty, output)
-    console.print(f"wrote {output} with {len(specs)} fault(s)")
+    _say(f"wrote {output} with {len(specs)} fault(s)")
 
 
 # ------------------------------------------------------------------------------- run
@@ -183,14 +183,64 @@ def run(
             "--method paper, ours otherwise."
         ),
     ] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(help=ROBOT_HELP + " Required when the log has no grfguard metadata."),
+    ] = None,
+    time_order: Annotated[
+        str,
+        typer.Option(
+            "--time-order",
+            help="Rows whose time does not advance: strict (error), drop (drop them) or "
+            "split (run each increasing segment on its own).",
+        ),
+    ] = "strict",
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
     from grfguard.io.logio import load_log, write_log
+    from grfguard.io.safe import check_output
 
-    df = load_log(log)
-    result = _run_monitor(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
+    rob = _check_run_inputs(config, thresholds, robot)
+    check_output(output, inputs=[log, config, thresholds, robot], what="output log")
+    df = load_log(log, time_order=time_order)
+    from grfguard._cliutil import robot_for_log
+
+    robot_for_log(df, rob, str(log))
+    result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
     write_log(result, output)
-    console.print(f"wrote {output}: {len(result)} samples")
+    _say(f"wrote {output}: {len(result)} samples")
+
+
+def _check_run_inputs(config: Path | None, thresholds: Path | None, robot: str | None) -> Any:
+    """Validate the config, thresholds and robot files before any work (errors name the
+    file and key); returns the ``--robot`` robot or None."""
+    from grfguard._cliutil import check_monitor_toml, check_thresholds_toml, resolve_robot
+
+    if config is not None:
+        check_monitor_toml(config)
+    if thresholds is not None:
+        check_thresholds_toml(thresholds)
+    return resolve_robot(robot)
+
+
+def _run_segments(df: Any, **kw: Any) -> Any:
+    """Run the monitor; a log read with ``time_order="split"`` runs segment by segment."""
+    from grfguard.io.logio import SEGMENT
+
+    if SEGMENT not in df.columns:
+        return _run_monitor(df, **kw)
+    import pandas as pd
+
+    parts = []
+    for k, part in df.groupby(SEGMENT, sort=False):
+        seg = part.drop(columns=[SEGMENT]).reset_index(drop=True)
+        seg.attrs = dict(df.attrs)
+        res = _run_monitor(seg, **kw)
+        res[SEGMENT] = k
+        parts.append(res)
+    out = pd.concat(parts, ignore_index=True)
+    out.attrs = dict(parts[0].attrs)
+    return out
 
 
 def _run_monitor(
@@ -267,16 +317,25 @@ def calibrate(
         float, typer.Option("--false-alarm-rate", help="Target false alarms per hour.")
     ] = 0.1,
     config: Annotated[Path | None, typer.Option(help="Monitor config TOML.")] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(help=ROBOT_HELP + " Required when a log has no grfguard metadata."),
+    ] = None,
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
+    from grfguard._cliutil import robot_for_log
     from grfguard.detect.monitor import calibrate_monitor
     from grfguard.io.logio import load_log
+    from grfguard.io.safe import atomic_write_text, check_output
 
+    rob = _check_run_inputs(config, None, robot)
+    check_output(output, inputs=[*logs, config, robot], what="thresholds TOML")
     frames = [load_log(p) for p in logs]
+    for p, f in zip(logs, frames, strict=True):
+        robot_for_log(f, rob, str(p))
     th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(th.to_toml())
-    console.print(f"wrote {output} from {len(frames)} log(s)")
+    atomic_write_text(output, th.to_toml(), what="thresholds TOML")
+    _say(f"wrote {output} from {len(frames)} log(s)")
 
 
 # ---------------------------------------------------------------------------- report
@@ -292,21 +351,27 @@ def report(
     """Write a standalone HTML report and/or PNG figures of a run."""
     from grfguard.errors import ConfigError
     from grfguard.io.logio import read_log
+    from grfguard.io.safe import atomic_path, check_output, check_output_dir
 
     if output is None and png is None:
         raise ConfigError("nothing to write: give -o REPORT.html and/or --png DIR")
+    if output is not None:
+        check_output(output, inputs=[log], what="HTML report")
+    if png is not None:
+        check_output_dir(png, inputs=[log], what="figure directory", option="--png")
     df = read_log(log)
     metrics = _detection_metrics_or_none(df)
     if output is not None:
         from grfguard.report.html import write_html_report
 
-        write_html_report(df, output, metrics=metrics)
-        console.print(f"wrote {output}")
+        with atomic_path(output, what="HTML report") as tmp:
+            write_html_report(df, tmp, metrics=metrics)
+        _say(f"wrote {output}")
     if png is not None:
         from grfguard.report.figures import write_png_figures
 
         paths = write_png_figures(df, png, metrics=metrics)
-        console.print(f"wrote {len(paths)} figure(s) to {png}")
+        _say(f"wrote {len(paths)} figure(s) to {png}")
 
 
 def _detection_metrics_or_none(df: Any) -> Any:
@@ -324,8 +389,12 @@ def demo(
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
 ) -> None:
     """The paper's scenario end to end: simulate, inject, run both methods, evaluate, report."""
+    from grfguard._cliutil import check_seed
     from grfguard.demo import run_demo
+    from grfguard.io.safe import check_output_dir
 
+    check_seed(seed)
+    check_output_dir(out_dir)
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
 
 
