@@ -113,7 +113,7 @@ def write_bag(
     rates_hz: Mapping[str, float] | None = None,
     stamp_jitter_s: float = 30e-6,
     latency_s: float = 0.2e-3,
-    latency_jitter_s: float = 0.3e-3,
+    latency_jitter_s: float = 0.1e-3,
     gaps: Mapping[str, tuple[float, float]] | None = None,
     omit: Iterable[str] = (),
     joint_names: Iterable[str] | None = None,
@@ -193,7 +193,10 @@ def write_bag(
         stamp_ns = sample_ns + np.round(jit * 1e9).astype(np.int64)
         lat = latency_s + rng.exponential(latency_jitter_s, n) if latency_jitter_s > 0 else (
             np.full(n, latency_s))
-        recv_ns = np.maximum.accumulate(sample_ns + np.round(lat * 1e9).astype(np.int64))
+        # in order per topic, at least 1 us apart (a transport queues, it does not reorder)
+        step_ns = np.arange(n, dtype=np.int64) * 1000
+        recv_ns = sample_ns + np.round(lat * 1e9).astype(np.int64)
+        recv_ns = np.maximum.accumulate(recv_ns - step_ns) + step_ns
         cols = log.iloc[idx]
         if topic == "/imu/data":
             tpl = _template(ts, typename, frame="imu_link")
