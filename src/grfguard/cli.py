@@ -18,6 +18,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
+from grfguard.cli_campaign import campaign_app
 from grfguard.errors import GrfguardError
 
 app = typer.Typer(
@@ -29,6 +30,7 @@ app = typer.Typer(
 )
 robot_app = typer.Typer(help="Robot descriptions.", no_args_is_help=True)
 app.add_typer(robot_app, name="robot")
+app.add_typer(campaign_app, name="campaign")
 
 console = Console(stderr=True)
 out = Console()
