@@ -16,7 +16,7 @@ import os
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -223,8 +223,13 @@ def run_campaign(
                     walk_futs.pop(wid).release()
                 bar.update(task, advance=1, failed=n_failed)
         t2 = time.perf_counter()
-        return RunSummary(len(cells), len(cells) - len(todo), n_ok, n_failed, len(order),
-                          t2 - t0, t2 - t1, address)
+        n_workers_seen = len(client.scheduler_info().get("workers", {}))
+        summary = RunSummary(len(cells), len(cells) - len(todo), n_ok, n_failed, len(order),
+                             t2 - t0, t2 - t1, address)
+        store.log_run({**asdict(summary), "cells_per_min": summary.cells_per_min,
+                       "workers": n_workers_seen, "campaign": spec.name,
+                       "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+        return summary
     finally:
         if own_cluster is not None:
             client.close()

@@ -6,6 +6,7 @@ Layout of ``RESULTS/``::
     cells.parquet                     every cell of the spec (id and parameters)
     cells/method=<m>/kind=<k>/<cell_id>.parquet   one result row per finished cell
     failed/<cell_id>.json             the error of a cell that failed (removed on success)
+    runs.jsonl                        one line per run: cells computed, time, workers
 
 Each result file is written to a temporary name in the same folder and renamed, so a
 file is either absent or complete; its name is the cell id, so writing a cell twice
@@ -93,6 +94,18 @@ class ResultStore:
         failed = self.failed_dir / f"{row['cell_id']}.json"
         failed.unlink(missing_ok=True)
         return True
+
+    def log_run(self, record: Mapping[str, Any]) -> None:
+        """Append one line to ``runs.jsonl`` (what a run computed, how fast)."""
+        with open(self.root / "runs.jsonl", "a") as fh:
+            fh.write(json.dumps(dict(record)) + "\n")
+
+    def runs(self) -> list[dict[str, Any]]:
+        """The records of :meth:`log_run`, oldest first."""
+        p = self.root / "runs.jsonl"
+        if not p.exists():
+            return []
+        return [json.loads(line) for line in p.read_text().splitlines() if line.strip()]
 
     def write_failure(self, cell_id: str, error: str) -> None:
         """Record why a cell failed (a rerun tries it again)."""
