@@ -18,6 +18,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from rich.table import Table
 
 from grfguard._cliutil import ROBOT_HELP, friendly, say
+from grfguard.cli_campaign import campaign_app
 
 app = typer.Typer(
     name="grfguard",
@@ -26,6 +27,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+app.add_typer(campaign_app, name="campaign")
 
 console = Console(stderr=True)
 out = Console()
