@@ -8,16 +8,17 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from grfguard._cliutil import ROBOT_HELP, friendly, say
+from grfguard._cliutil import ROBOT_HELP
+from grfguard._term import cli_friendly as _friendly
+from grfguard._term import cli_say as _say
+from grfguard._term import console, out  # noqa: F401  (re-exported for cli_* modules)
+from grfguard._term import progress as _progress
 from grfguard.cli_campaign import campaign_app
 
 app = typer.Typer(
@@ -28,34 +29,6 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 app.add_typer(campaign_app, name="campaign")
-
-console = Console(stderr=True)
-out = Console()
-
-
-def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn grfguard errors into one red line and exit code 2 (user text never read as
-    markup); print grfguard warnings as ``warning:`` lines."""
-    return friendly(console)(fn)
-
-
-def _say(message: str) -> None:
-    """One plain-text status line on stderr (paths may contain ``[...]``)."""
-    say(console, message)
-
-
-def _progress(description: str) -> Progress:
-    return Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>5.1f}%"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-        disable=not console.is_terminal,
-    )
-
 
 # -------------------------------------------------------------------------- simulate
 @app.command()
