@@ -342,11 +342,11 @@ def calibrate(
     config: Annotated[Path | None, typer.Option(help="Monitor config TOML.")] = None,
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
-    from grfguard.detect.monitor import calibrate_monitor
+    from grfguard.detect.calibrate import calibrate_thresholds
     from grfguard.io.logio import load_log
 
     frames = [load_log(p) for p in logs]
-    th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
+    th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     output.parent.mkdir(parents=True, exist_ok=True)
     output.write_text(th.to_toml())
     console.print(f"wrote {output} from {len(frames)} log(s)")
