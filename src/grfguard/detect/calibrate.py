@@ -50,6 +50,37 @@ def _fault_free_statistics(
     return pd.DataFrame(rows, index=log.index), inputs
 
 
+def _scale(runs: Sequence[pd.DataFrame], prefix: str, names: Sequence[str],
+           fallback: float) -> float:
+    """Robust scale of the residual columns ``<prefix><name>`` over all runs (``fallback``
+    when no sample was valid)."""
+    r = np.concatenate([run[[f"{prefix}{s}" for s in names]].to_numpy(float).ravel()
+                        for run in runs])
+    return float(robust_scale(r[np.isfinite(r)])) if np.isfinite(r).any() else fallback
+
+
+def _peaks(runs: Sequence[pd.DataFrame], prefix: str, names: Sequence[str], sigma: float,
+           kappa: float) -> np.ndarray:
+    """Excursion peaks of the un-reset CUSUM of every normalised residual column."""
+    out = []
+    for r in runs:
+        for nm in names:
+            res = r[f"{prefix}{nm}"].to_numpy(float)
+            m = np.isfinite(res)
+            if not m.any():
+                continue
+            g = cusum_batch(res[m] / sigma, kappa, 1e300, reset=False)
+            out.append(excursion_peaks(np.maximum(g.g_pos, g.g_neg)))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _check_fault_free(log: pd.DataFrame) -> None:
+    if any(c in log.columns and (log[c].astype(str) != "none").any()
+           for c in (f"fault_kind_{s}" for s in SENSOR_NAMES)):
+        raise ConfigError("calibrate_thresholds needs fault-free logs; this one has "
+                          "injected faults (fault_kind_* != 'none')")
+
+
 def calibrate_thresholds(
     logs: Sequence[pd.DataFrame],
     false_alarm_rate_per_hour: float = 0.1,
@@ -93,10 +124,7 @@ def calibrate_thresholds(
     paper_max = np.zeros(_N)
     hours = 0.0
     for log in logs:
-        if any(c in log.columns and (log[c].astype(str) != "none").any()
-               for c in (f"fault_kind_{s}" for s in SENSOR_NAMES)):
-            raise ConfigError("calibrate_thresholds needs fault-free logs; this one has "
-                              "injected faults (fault_kind_* != 'none')")
+        _check_fault_free(log)
         diag, inputs = _fault_free_statistics(
             log, replace(cfg, method="default", thresholds=inf_th, diagnostics=True))
         runs.append(diag)
@@ -107,34 +135,12 @@ def calibrate_thresholds(
         etaf = np.column_stack([pout[f"eta_filtered_{s}"] for s in SENSOR_NAMES])
         paper_max = np.maximum(paper_max, np.nanmax(np.abs(etaf), axis=0))
     rate = false_alarm_rate_per_hour / 18.0
-    sw = np.concatenate([r[[f"res_swing_{s}" for s in SENSOR_NAMES]].to_numpy(float).ravel()
-                         for r in runs])
-    sigma_sw = float(robust_scale(sw[np.isfinite(sw)])) if np.isfinite(sw).any() else \
-        base.sigma_swing_n
-    tot = np.concatenate([r[[f"res_total_{s}" for s in SIDES]].to_numpy(float).ravel()
-                          for r in runs])
-    sigma_t = float(robust_scale(tot[np.isfinite(tot)])) if np.isfinite(tot).any() else \
-        base.total_sigma
-    cor = np.concatenate([r[[f"res_corner_{s}" for s in SENSOR_NAMES]].to_numpy(float).ravel()
-                          for r in runs])
-    sigma_c = float(robust_scale(cor[np.isfinite(cor)])) if np.isfinite(cor).any() else \
-        base.corner_sigma
-
-    def peaks(prefix: str, names: Sequence[str], sigma: float, kappa: float) -> np.ndarray:
-        out = []
-        for r in runs:
-            for nm in names:
-                res = r[f"{prefix}{nm}"].to_numpy(float)
-                m = np.isfinite(res)
-                if not m.any():
-                    continue
-                g = cusum_batch(res[m] / sigma, kappa, 1e300, reset=False)
-                out.append(excursion_peaks(np.maximum(g.g_pos, g.g_neg)))
-        return np.concatenate(out) if out else np.zeros(0)
-
-    p_sw = peaks("res_swing_", SENSOR_NAMES, sigma_sw, base.swing_kappa)
-    p_t = peaks("res_total_", SIDES, sigma_t, base.total_kappa)
-    p_c = peaks("res_corner_", SENSOR_NAMES, sigma_c, base.corner_kappa)
+    sigma_sw = _scale(runs, "res_swing_", SENSOR_NAMES, base.sigma_swing_n)
+    sigma_t = _scale(runs, "res_total_", SIDES, base.total_sigma)
+    sigma_c = _scale(runs, "res_corner_", SENSOR_NAMES, base.corner_sigma)
+    p_sw = _peaks(runs, "res_swing_", SENSOR_NAMES, sigma_sw, base.swing_kappa)
+    p_t = _peaks(runs, "res_total_", SIDES, sigma_t, base.total_kappa)
+    p_c = _peaks(runs, "res_corner_", SENSOR_NAMES, sigma_c, base.corner_kappa)
     h_sw = threshold_for_rate(p_sw, hours * 8, rate, safety, floor=min_h)
     h_t = threshold_for_rate(p_t, hours * 2, rate, safety, floor=min_h)
     h_c = threshold_for_rate(p_c, hours * 8, rate, safety, floor=min_h)

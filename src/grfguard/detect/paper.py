@@ -98,8 +98,8 @@ class PaperDetector:
 
     @staticmethod
     def _scalars(out: dict[str, Any]) -> dict[str, Any]:
-        """numpy scalars to plain Python values."""
-        return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in out.items()}
+        """0-d numpy values to plain Python values (bool, float, str)."""
+        return {k: np.asarray(v).item() for k, v in out.items()}
 
     def _init_length(self, t: np.ndarray) -> int:
         """Number of leading samples in the initialisation window."""
