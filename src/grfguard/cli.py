@@ -299,7 +299,7 @@ def calibrate(
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
     from grfguard._cliutil import robot_for_log
-    from grfguard.detect.monitor import calibrate_monitor
+    from grfguard.detect.calibrate import calibrate_thresholds
     from grfguard.io.logio import load_log
     from grfguard.io.safe import atomic_write_text, check_output
 
@@ -308,7 +308,7 @@ def calibrate(
     frames = [load_log(p) for p in logs]
     for p, f in zip(logs, frames, strict=True):
         robot_for_log(f, rob, str(p))
-    th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
+    th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     atomic_write_text(output, th.to_toml(), what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")
 
