@@ -294,24 +294,17 @@ def report(
 
     if output is None and png is None:
         raise ConfigError("nothing to write: give -o REPORT.html and/or --png DIR")
-    df = read_log(log)
-    metrics = _detection_metrics_or_none(df)
+    df = read_log(log)  # the report computes the metrics of `grfguard evaluate` itself
     if output is not None:
         from grfguard.report.html import write_html_report
 
-        write_html_report(df, output, metrics=metrics)
+        write_html_report(df, output)
         console.print(f"wrote {output}")
     if png is not None:
         from grfguard.report.figures import write_png_figures
 
-        paths = write_png_figures(df, png, metrics=metrics)
+        paths = write_png_figures(df, png)
         console.print(f"wrote {len(paths)} figure(s) to {png}")
-
-
-def _detection_metrics_or_none(df: Any) -> Any:
-    from grfguard.evaluate.frame import detection_metrics, has_detection_truth
-
-    return detection_metrics(df)["sensors"] if has_detection_truth(df) else None
 
 
 # ------------------------------------------------------------------------------ demo
