@@ -54,7 +54,6 @@ from grfguard.estimate.kinematic import (
     KinematicFrames,
     KinematicModel,
     angular_momentum_about_com,
-    quat_to_matrix,
     rotate_frames,
 )
 from grfguard.estimate.legs import (
@@ -79,6 +78,7 @@ from grfguard.io.schema import (
     vfs_col,
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
+from grfguard.rotations import quat_to_matrix
 
 __all__ = ["VFSConfig", "VirtualForceSensor", "VFS_OUTPUT_COLUMNS", "with_vfs_columns"]
 
