@@ -334,25 +334,18 @@ def report(
         check_output(output, inputs=[log], what="HTML report")
     if png is not None:
         check_output_dir(png, inputs=[log], what="figure directory", option="--png")
-    df = read_log(log)
-    metrics = _detection_metrics_or_none(df)
+    df = read_log(log)  # the report computes the metrics of `grfguard evaluate` itself
     if output is not None:
         from grfguard.report.html import write_html_report
 
         with atomic_path(output, what="HTML report") as tmp:
-            write_html_report(df, tmp, metrics=metrics)
+            write_html_report(df, tmp)
         _say(f"wrote {output}")
     if png is not None:
         from grfguard.report.figures import write_png_figures
 
-        paths = write_png_figures(df, png, metrics=metrics)
+        paths = write_png_figures(df, png)
         _say(f"wrote {len(paths)} figure(s) to {png}")
-
-
-def _detection_metrics_or_none(df: Any) -> Any:
-    from grfguard.evaluate.frame import detection_metrics, has_detection_truth
-
-    return detection_metrics(df)["sensors"] if has_detection_truth(df) else None
 
 
 # ------------------------------------------------------------------------------ demo
