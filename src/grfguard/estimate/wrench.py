@@ -69,7 +69,7 @@ def _deriv(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
     return savgol_filter(x, win, 3, deriv=order, delta=dt, axis=0, mode="interp")
 
 
-def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.04
+def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1
                       ) -> WrenchEstimate:
     """Virtual foot wrenches of ``df`` (module docstring).
 
