@@ -135,3 +135,29 @@ def test_bad_toml_keys_name_file_and_key(tmp_path) -> None:
     p = _write(tmp_path, 'name = "x"\nmodel = "a.urdf"\nsensing = "strain"\n')
     with pytest.raises(ConfigError, match=r"'sensing' must be one of"):
         load_description(p)
+
+
+def test_cli_robot_list_show_simulate_decimate(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from grfguard.cli import app
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["robot", "list"])
+    assert res.exit_code == 0 and "talos" in res.stdout and "g1" in res.stdout
+    res = runner.invoke(app, ["robot", "show", "talos"])
+    assert res.exit_code == 0, res.output
+    assert "joints      32" in res.stdout and "ft_r_tz" in res.stdout
+    out = tmp_path / "g1.parquet"
+    res = runner.invoke(app, ["simulate", "--robot", "g1", "--duration", "2", "--noise",
+                              "none", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    log = load_log(out)
+    assert log.attrs["robot_name"] == "g1" and "force_l4" in log.columns
+    res = runner.invoke(app, ["decimate", str(out), "--rate", "200", "-o",
+                              str(tmp_path / "g1_200.parquet")])
+    assert res.exit_code == 0, res.output
+    assert len(load_log(tmp_path / "g1_200.parquet")) == 400
+    res = runner.invoke(app, ["decimate", str(out), "--rate", "300", "-o",
+                              str(tmp_path / "x.parquet")])
+    assert res.exit_code == 2 and "must divide" in res.output
