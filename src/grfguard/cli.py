@@ -87,6 +87,9 @@ def simulate(
     seed: Annotated[int, typer.Option(help="Seed of the sensor noise.")] = 0,
     robot: Annotated[Path | None, typer.Option(help="Robot TOML (default SURALP).")] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
+    reality: Annotated[
+        str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
+    ] = None,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard.io.logio import write_log
@@ -112,6 +115,7 @@ def simulate(
             noise=noise_cfg,
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
+            reality=__import__("grfguard.sim.reality", fromlist=["x"]).load_reality(reality),
         )
     write_log(df, output)
     console.print(
@@ -237,6 +241,10 @@ def _run_monitor(
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
+    if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
+        from grfguard.cli_calib import corrected_log
+
+        df = corrected_log(df, thresholds)
     return Monitor.for_log(df, config=cfg).run(df)
 
 
@@ -340,15 +348,24 @@ def calibrate(
         float, typer.Option("--false-alarm-rate", help="Target false alarms per hour.")
     ] = 0.1,
     config: Annotated[Path | None, typer.Option(help="Monitor config TOML.")] = None,
+    model: Annotated[
+        bool, typer.Option("--model", help="Also fit model corrections (grfguard.calib).")
+    ] = False,
+    mass: Annotated[float | None, typer.Option(help="Measured robot mass [kg].")] = None,
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
     from grfguard.detect.monitor import calibrate_monitor
     from grfguard.io.logio import load_log
 
     frames = [load_log(p) for p in logs]
+    corr_toml = ""
+    if model:  # model corrections first, thresholds on the corrected data (issue 10)
+        from grfguard.cli_calib import fit_model_corrections
+
+        frames, corr_toml = fit_model_corrections(frames, mass, console)
     th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(th.to_toml())
+    output.write_text(th.to_toml() + corr_toml)
     console.print(f"wrote {output} from {len(frames)} log(s)")
 
 
