@@ -47,6 +47,9 @@ def simulate(
     ] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
     rate: Annotated[float, typer.Option(help="Log sample rate [Hz] (divides 1000).")] = 1000.0,
+    reality: Annotated[
+        str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
+    ] = None,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard._cliutil import check_seed, resolve_robot
@@ -56,6 +59,7 @@ def simulate(
     from grfguard.model.robot import SURALP
     from grfguard.sim import GaitConfig, NoiseConfig
     from grfguard.sim import simulate as _simulate
+    from grfguard.sim.reality import load_reality
 
     check_seed(seed)
     if is_described_robot(robot):
@@ -82,6 +86,7 @@ def simulate(
             noise=noise_cfg,
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
+            reality=load_reality(reality),
         )
     if rate != 1000.0:
         from grfguard.sim.wholebody import decimate
@@ -229,6 +234,10 @@ def _run_monitor(
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
+    if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
+        from grfguard.cli_calib import corrected_log
+
+        df = corrected_log(df, thresholds)
     return Monitor.for_log(df, config=cfg).run(df)
 
 
@@ -296,6 +305,10 @@ def calibrate(
         str | None,
         typer.Option(help=ROBOT_HELP + " Required when a log has no grfguard metadata."),
     ] = None,
+    model: Annotated[
+        bool, typer.Option("--model", help="Also fit model corrections (grfguard.calib).")
+    ] = False,
+    mass: Annotated[float | None, typer.Option(help="Measured robot mass [kg].")] = None,
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
     from grfguard._cliutil import robot_for_log
@@ -308,8 +321,13 @@ def calibrate(
     frames = [load_log(p) for p in logs]
     for p, f in zip(logs, frames, strict=True):
         robot_for_log(f, rob, str(p))
+    corr_toml = ""
+    if model:  # model corrections first, thresholds on the corrected data (issue 10)
+        from grfguard.cli_calib import fit_model_corrections
+
+        frames, corr_toml = fit_model_corrections(frames, mass, console)
     th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
-    atomic_write_text(output, th.to_toml(), what="thresholds TOML")
+    atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")
 
 
