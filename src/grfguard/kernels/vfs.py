@@ -42,7 +42,7 @@ from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
 from grfguard.kernels._jit import njit
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
-from grfguard.kernels.nnls import RHO, prior_qp
+from grfguard.kernels.nnls import prior_qp
 
 __all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch"]
 
@@ -776,3 +776,76 @@ def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
     k = VFSKernel(vfs, has_gyro=has_gyro, has_ref=has_ref)
     Y = k.run(X)
     return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
+
+
+def _base_sensor():
+    from grfguard.estimate.vfs import VirtualForceSensor
+
+    return VirtualForceSensor
+
+
+class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
+    """Drop-in :class:`~grfguard.estimate.vfs.VirtualForceSensor` running the compiled step.
+
+    Same constructor, ``for_log``, ``reset``, ``update(row) -> dict`` and
+    ``run(log) -> DataFrame``; plus the array call :meth:`update_array`. Settings the
+    kernel does not cover (see :meth:`VFSKernel.supports`) fall back to the pure-Python
+    sensor. ``update`` assumes the gyro and planned contact are present in every row
+    (the log contract of a live robot); ``run`` reads what the log has.
+
+    Example:
+        >>> vfs = CompiledVirtualForceSensor.for_log(log)
+        >>> out = vfs.run(log)                      # same columns as the Python sensor
+        >>> mon = Monitor(MonitorConfig(), vfs)     # the monitor takes it as it is
+    """
+
+    def __init__(self, robot=None, config=None, kinematics=None) -> None:
+        super().__init__(robot, config, kinematics)
+        self.compiled = VFSKernel.supports(self.config)
+        self._kern = {}
+        self._y = np.empty(N_OUT)
+        self._x = np.empty(N_IN)
+
+    def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> VFSKernel:
+        """The compiled kernel for inputs with / without gyro and planned contact."""
+        key = (has_gyro, has_ref)
+        if key not in self._kern:
+            self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
+        return self._kern[key]
+
+    def reset(self) -> None:
+        super().reset()
+        for k in getattr(self, "_kern", {}).values():
+            k.reset()
+
+    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample as arrays: ``x`` (24,) in :data:`IN_COLUMNS` order -> (22,) in
+        :data:`OUT_COLUMNS` order (written into ``y`` when given). Never raises on a bad
+        sample (non-finite input: last output held, ``vfs_valid = 0``)."""
+        if y is None:
+            y = np.empty(N_OUT)
+        k = self.kernel()
+        vfs_step(x, y, *k._args())
+        return y
+
+    def update(self, row: Mapping[str, float]) -> dict[str, float]:
+        if not self.compiled:
+            return super().update(row)
+        x = self._x
+        for i, c in enumerate(IN_COLUMNS):
+            try:
+                x[i] = float(row[c])
+            except (KeyError, TypeError, ValueError):
+                x[i] = np.nan
+        y = self.update_array(x, self._y)
+        return dict(zip(OUT_COLUMNS, y.tolist(), strict=True))
+
+    def run(self, log: pd.DataFrame) -> pd.DataFrame:
+        if not self.compiled:
+            return super().run(log)
+        super().reset()
+        self._check_columns(log.columns)
+        X, has_gyro, has_ref = log_to_array(log)
+        k = self.kernel(has_gyro, has_ref)
+        Y = k.run(X)
+        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
