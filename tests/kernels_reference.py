@@ -29,7 +29,7 @@ def random_tree_xml(n_joints: int, seed: int) -> str:
     bodies: list[list[str]] = [[]]  # children xml per body
     parents = [-1]
     kinds = []
-    for j in range(n_joints):
+    for _ in range(n_joints):
         parents.append(int(rng.integers(0, len(parents))))
         bodies.append([])
         kinds.append(rng.choice(["hinge", "hinge", "hinge", "slide", "ball"]))

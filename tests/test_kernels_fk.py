@@ -5,12 +5,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-from kernels_reference import random_tree_xml
 
 from grfguard.errors import ConfigError
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
 from grfguard.model.mjcf import build_model
 from grfguard.model.robot import SURALP
+from kernels_reference import random_tree_xml
 
 
 def _compare(model: mujoco.MjModel, n: int, seed: int) -> float:

@@ -47,16 +47,17 @@ def _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
         g0 += rel[j, 0] * prior[j]
         g1 += rel[j, 1] * prior[j]
         s += prior[j]
-    rhs[0] = -g0
-    rhs[1] = -g1
-    rhs[2] = RHO * total - RHO * s
+    # heavy row first (Householder QR of a weighted problem: rows by decreasing weight)
+    rhs[0] = RHO * total - RHO * s
+    rhs[1] = -g0
+    rhs[2] = -g1
     for r in range(3, nr):
         rhs[r] = 0.0
     for c in range(k):
         j = free[c]
-        M[0, c] = rel[j, 0]
-        M[1, c] = rel[j, 1]
-        M[2, c] = RHO
+        M[0, c] = RHO
+        M[1, c] = rel[j, 0]
+        M[2, c] = rel[j, 1]
         for r in range(3, nr):
             M[r, c] = 0.0
         M[3 + c, c] = sw

@@ -40,7 +40,7 @@ from scipy.signal import butter, lfilter_zi
 from grfguard.errors import ConfigError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import fma, njit
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
 from grfguard.kernels.nnls import prior_qp
 
@@ -415,13 +415,13 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
                 lin[2] += c2
             R = ximat[bi]
             P = pr[i]
-            # dR = R P^T
-            d01 = R[0] * P[3] + R[1] * P[4] + R[2] * P[5]
-            d02 = R[0] * P[6] + R[1] * P[7] + R[2] * P[8]
-            d10 = R[3] * P[0] + R[4] * P[1] + R[5] * P[2]
-            d12 = R[3] * P[6] + R[4] * P[7] + R[5] * P[8]
-            d20 = R[6] * P[0] + R[7] * P[1] + R[8] * P[2]
-            d21 = R[6] * P[3] + R[7] * P[4] + R[8] * P[5]
+            # dR = R P^T as numpy's stacked matmul computes it (fused multiply-adds)
+            d01 = fma(R[2], P[5], fma(R[1], P[4], R[0] * P[3]))
+            d02 = fma(R[2], P[8], fma(R[1], P[7], R[0] * P[6]))
+            d10 = fma(R[5], P[2], fma(R[4], P[1], R[3] * P[0]))
+            d12 = fma(R[5], P[8], fma(R[4], P[7], R[3] * P[6]))
+            d20 = fma(R[8], P[2], fma(R[7], P[1], R[6] * P[0]))
+            d21 = fma(R[8], P[5], fma(R[7], P[4], R[6] * P[3]))
             om0 = (d21 - d12) / (2.0 * dt)
             om1 = (d02 - d20) / (2.0 * dt)
             om2 = (d10 - d01) / (2.0 * dt)
@@ -429,9 +429,10 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
             wb0 = (R[0] * om0 + R[3] * om1 + R[6] * om2) * body_inertia[i, 0]
             wb1 = (R[1] * om0 + R[4] * om1 + R[7] * om2) * body_inertia[i, 1]
             wb2 = (R[2] * om0 + R[5] * om1 + R[8] * om2) * body_inertia[i, 2]
-            t0 = R[0] * wb0 + R[1] * wb1 + R[2] * wb2
-            t1 = R[3] * wb0 + R[4] * wb1 + R[5] * wb2
-            t2 = R[6] * wb0 + R[7] * wb1 + R[8] * wb2
+            # (einsum's summation order: first + last, then the middle term)
+            t0 = (R[0] * wb0 + R[2] * wb2) + R[1] * wb1
+            t1 = (R[3] * wb0 + R[5] * wb2) + R[4] * wb1
+            t2 = (R[6] * wb0 + R[8] * wb2) + R[7] * wb1
             if i == 0:
                 L0, L1, L2 = t0, t1, t2
             else:
@@ -476,9 +477,10 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         r21 = 2 * (y_ * z_ + w_ * x_)
         r22 = 1 - 2 * (x_ * x_ + y_ * y_)
         a0, a1, a2 = x[_I_ACC], x[_I_ACC + 1], x[_I_ACC + 2]
-        v3a[0] = (r00 * a0 + r01 * a1 + r02 * a2) - 0.0
-        v3a[1] = (r10 * a0 + r11 * a1 + r12 * a2) - 0.0
-        v3a[2] = (r20 * a0 + r21 * a1 + r22 * a2) - g
+        # (einsum's summation order: first + last, then the middle term)
+        v3a[0] = ((r00 * a0 + r02 * a2) + r01 * a1) - 0.0
+        v3a[1] = ((r10 * a0 + r12 * a2) + r11 * a1) - 0.0
+        v3a[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
         for k in range(3):
             v3b[k] = raw[6 + k] - v3a[k]
         _lfilter_step(filt_b[2], filt_a[2], zac, v3a, v3c, filt_zi[2], state[_S_ACC_OK] == 0.0)
