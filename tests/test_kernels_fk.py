@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from grfguard.errors import ConfigError
-from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
+from grfguard.kernels.fk import N_WORK, TreeModel, fk_batch, fk_sites, fk_tree
 from grfguard.model.mjcf import build_model
 from grfguard.model.robot import SURALP
 from kernels_reference import random_tree_xml
@@ -39,10 +39,10 @@ def _compare(model: mujoco.MjModel, n: int, seed: int) -> float:
         d.qpos[:] = q
         mujoco.mj_kinematics(model, d)
         mujoco.mj_comPos(model, d)
-        fk_tree(q, *tm.arrays(), work_q, *frames, work_m)
+        fk_tree(q, *tm.arrays(), work_q, *frames, work_m, np.zeros(N_WORK))
         xpos, xquat, xmat, xipos, ximat, stc = frames
         fk_sites(sites, tm.site_body, tm.site_sameframe, tm.site_pos, tm.site_quat, xpos, xquat,
-                 xmat, xipos, ximat, sxp, sxm)
+                 xmat, xipos, ximat, sxp, sxm, np.zeros(8))
         for ours, theirs in (
             (xpos, d.xpos), (xquat, d.xquat), (xmat, d.xmat), (xipos, d.xipos),
             (ximat, d.ximat), (stc, d.subtree_com), (sxp, d.site_xpos), (sxm, d.site_xmat),
@@ -70,3 +70,22 @@ def test_fk_rejects_mocap_bodies():
            '</worldbody></mujoco>')
     with pytest.raises(ConfigError, match="mocap"):
         TreeModel.from_mujoco(mujoco.MjModel.from_xml_string(xml))
+
+
+def test_fk_batch_equals_one_sample_calls():
+    model = mujoco.MjModel.from_xml_string(random_tree_xml(30, 3))
+    tm = TreeModel.from_mujoco(model)
+    rng = np.random.default_rng(4)
+    Q = np.tile(model.qpos0, (5, 1))
+    Q[:, 7:] += rng.uniform(-1.0, 1.0, (5, model.nq - 7))
+    com = np.zeros((5, 3))
+    xi = np.zeros((5, model.nbody, 3))
+    fk_batch(Q, *tm.arrays(), com, xi)
+    d = mujoco.MjData(model)
+    for t in range(5):
+        d.qpos[:] = Q[t]
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        # a few units in the last place on general trees (bit-equal on SURALP)
+        np.testing.assert_allclose(com[t], d.subtree_com[1], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(xi[t], d.xipos, rtol=0, atol=1e-12)

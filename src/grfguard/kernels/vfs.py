@@ -287,7 +287,7 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         qin[iprm[_IP_JOINTS + j]] = x[j]
     fk_tree(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
             body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-            qpos, xpos, xquat, xmat, xipos, ximat, stc, msub)
+            qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, ws[o : o + 27])
     sel = iws[32:43]
     sel[0] = iprm[_IP_IMU]
     for k in range(8):
@@ -295,7 +295,7 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     sel[9] = iprm[_IP_SOLES]
     sel[10] = iprm[_IP_SOLES + 1]
     fk_sites(sel, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
-             ximat, sxp, sxm)
+             ximat, sxp, sxm, ws[o : o + 7])
     trunk = iprm[_IP_TRUNK]
     p_AC0, p_AC1, p_AC2 = stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
     for k in range(8):
