@@ -231,6 +231,12 @@ def test_truncated_csv_is_refused(walk, tmp_path) -> None:
     plain.write_bytes(text[: len(text) - 200])
     with pytest.raises(LogFormatError, match=r"last row \(row 49\) has \d+ of \d+ fields"):
         read_log(plain)
+    # a row damaged in the middle (one field lost) is not padded with NaN either
+    lines = text.decode().splitlines(keepends=True)
+    lines[11] = lines[11].replace(",", "", 1)
+    plain.write_text("".join(lines))
+    with pytest.raises(LogFormatError, match=r"row 10 \(line 12\) has \d+ of \d+ fields"):
+        read_log(plain)
 
 
 # --------------------------------------------------------------- row 9: one clear line
