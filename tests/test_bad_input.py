@@ -412,3 +412,34 @@ def test_json_dump_of_warning_free_read(walk) -> None:
         df = read_log(walk)
     assert "time_gaps" not in df.attrs
     json.dumps(df.attrs)  # metadata stays JSON
+
+
+# ---------------------------------------------------------- row 6/11: units on load
+@pytest.mark.parametrize(
+    ("change", "needle"),
+    [
+        ("kgf", "they look like kgf: multiply by 9.80665"),
+        ("degrees", "degrees? convert the joint angles to rad"),
+        ("g", "the acceleration looks like g"),
+    ],
+)
+def test_unit_mistakes_are_refused_with_the_fix(walk, tmp_path, change, needle) -> None:
+    df = read_log(walk)
+    if change == "kgf":
+        cols = [c for c in df.columns if c.startswith("force_")]
+        df[cols] = df[cols] / 9.80665
+    elif change == "degrees":
+        cols = [c for c in df.columns if c.startswith("q_")]
+        df[cols] = np.degrees(df[cols])
+    else:
+        cols = ["imu_acc_x", "imu_acc_y", "imu_acc_z"]
+        df[cols] = df[cols] / 9.80665
+    p = tmp_path / "units.csv"
+    write_log(df, p)
+    before = _digest(p)
+    out = tmp_path / "o.parquet"
+    line = _one_error_line(runner.invoke(app, ["run", str(p), "-o", str(out)]))
+    assert needle in line and str(p) in line and "--no-unit-check" in line
+    assert not out.exists() and _digest(p) == before
+    res = runner.invoke(app, ["run", str(p), "-o", str(out), "--no-unit-check"])
+    assert res.exit_code == 0, res.output

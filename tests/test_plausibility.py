@@ -16,6 +16,7 @@ from grfguard.errors import ConfigError
 from grfguard.io.plausibility import (
     PlausibilityChecker,
     PlausibleRanges,
+    check_log,
     clamp_recovered,
     force_range,
     ranges_for,
@@ -31,10 +32,10 @@ SMALL = RobotConfig(
 
 @pytest.fixture(scope="module")
 def walks() -> dict[str, pd.DataFrame]:
-    """4 s walks of SURALP (114 kg) and of a 60 kg robot, default noise."""
+    """6 s walks of SURALP (114 kg) and of a 60 kg robot, default noise."""
     return {
-        "suralp": simulate(SURALP, GaitConfig(duration=4.0), seed=4),
-        "small": simulate(SMALL, GaitConfig(duration=4.0), seed=4),
+        "suralp": simulate(SURALP, GaitConfig(duration=6.0), seed=4),
+        "small": simulate(SMALL, GaitConfig(duration=6.0), seed=4),
     }
 
 
@@ -141,3 +142,37 @@ def test_clamp_recovered_is_always_in_range(values) -> None:
 def test_bad_ranges_are_config_errors() -> None:
     with pytest.raises(ConfigError, match="plausibility.gyro_max"):
         PlausibleRanges(weight_n=1000.0, gyro_max=-1.0)
+
+
+@pytest.mark.parametrize("robot_name", ["suralp", "small"])
+def test_whole_log_checks_find_unit_and_wiring_mistakes(walks, robot_name) -> None:
+    robot = SURALP if robot_name == "suralp" else SMALL
+    df = walks[robot_name]
+    assert check_log(df, robot) == []  # a healthy walk raises nothing
+    forces = [c for c in df.columns if c.startswith("force_")]
+
+    def findings(d: pd.DataFrame) -> list[tuple[str, str, str]]:
+        return [(i.severity, i.column, i.message) for i in check_log(d, robot)]
+
+    for factor, unit in [(1 / 9.80665, "kgf"), (1e-3, "kN"), (0.224809, "lbf")]:
+        d = df.copy()
+        d[forces] *= factor
+        [(sev, col, msg)] = findings(d)
+        assert sev == "error" and col == "force_*" and f"look like {unit}" in msg
+    d = df.copy()
+    d[["imu_acc_x", "imu_acc_y", "imu_acc_z"]] /= 9.80665
+    assert findings(d)[0][:2] == ("error", "imu_acc_*") and "like g" in findings(d)[0][2]
+    d = df.copy()
+    d["q_r_hip_pitch"] = np.degrees(d["q_r_hip_pitch"])
+    assert [f[1] for f in findings(d)] == ["q_r_hip_pitch"] and "degrees" in findings(d)[0][2]
+    d = df.copy()
+    d[["force_r3", "force_l2"]] = d[["force_l2", "force_r3"]].to_numpy()
+    assert sorted(f[1] for f in findings(d)) == ["force_l2", "force_r3"]
+    assert "looks like a sensor of foot 'l'" in dict((f[1], f[2]) for f in findings(d))["force_r3"]
+    d = df.copy()
+    d["force_r2"] += 0.25 * robot.weight  # a large offset fault is a fault, not wiring
+    assert findings(d) == []
+    d = df.copy()
+    q = d[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy()
+    d[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]] = q[:, [1, 2, 3, 0]]
+    assert findings(d)[0][:2] == ("warning", "imu_quat_*")

@@ -197,17 +197,26 @@ def run(
             "split (run each increasing segment on its own).",
         ),
     ] = "strict",
+    unit_check: Annotated[
+        bool,
+        typer.Option(
+            "--unit-check/--no-unit-check",
+            help="Refuse forces in kN/kgf, acceleration in g, angles in degrees, a sensor "
+            "on the wrong foot.",
+        ),
+    ] = True,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
+    from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.logio import load_log, write_log
     from grfguard.io.safe import check_output
 
     rob = _check_run_inputs(config, thresholds, robot)
     check_output(output, inputs=[log, config, thresholds, robot], what="output log")
     df = load_log(log, time_order=time_order)
-    from grfguard._cliutil import robot_for_log
-
     robot_for_log(df, rob, str(log))
+    if unit_check:
+        check_log_plausible(df, rob, str(log))
     result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
     write_log(result, output)
     _say(f"wrote {output}: {len(result)} samples")
