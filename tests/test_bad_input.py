@@ -443,3 +443,26 @@ def test_unit_mistakes_are_refused_with_the_fix(walk, tmp_path, change, needle) 
     assert not out.exists() and _digest(p) == before
     res = runner.invoke(app, ["run", str(p), "-o", str(out), "--no-unit-check"])
     assert res.exit_code == 0, res.output
+
+
+# ------------------------------------------------- row 10: no misleading exit 0 (CLI part)
+def test_commands_that_need_truth_or_a_run_say_so(walk, tmp_path) -> None:
+    line = _one_error_line(runner.invoke(app, ["report", str(walk), "-o",
+                                               str(tmp_path / "r.html")]))
+    assert "never run" in line and "grfguard run" in line
+    assert not (tmp_path / "r.html").exists()
+    df = read_log(walk)
+    df = df.drop(columns=[c for c in df.columns if c.startswith("true_")])
+    no_truth = write_log(df, tmp_path / "no_truth.parquet")
+    out = tmp_path / "o.parquet"
+    assert runner.invoke(app, ["run", str(no_truth), "-o", str(out)]).exit_code == 0
+    line = _one_error_line(runner.invoke(app, ["evaluate", str(out)]))
+    assert "no truth" in line
+
+
+def test_fault_outside_the_log_is_refused(walk, tmp_path) -> None:
+    out = tmp_path / "f.parquet"
+    line = _one_error_line(runner.invoke(app, ["inject", str(walk), "-o", str(out),
+                                               "--fault", "r1=offset:10@50"]))
+    assert "outside the log" in line and "nothing would be injected" in line
+    assert not out.exists()
