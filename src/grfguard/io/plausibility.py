@@ -286,6 +286,17 @@ def clamp_recovered(values: Any, robot: Any, nan: float | None = None) -> Any:
 _FORCE_UNITS = (("kN", 1e-3), ("kgf", 1.0 / G), ("lbf", 0.224809), ("daN", 0.1))
 
 
+#: Rows used by :func:`check_log` at most (evenly spaced).
+_CHECK_ROWS = 100_000
+
+
+def _numeric(frame: pd.DataFrame) -> np.ndarray:
+    """``frame`` as a float array, text that is not a number as NaN."""
+    if all(pd.api.types.is_numeric_dtype(t) for t in frame.dtypes):
+        return frame.to_numpy(dtype=float)
+    return frame.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+
+
 @dataclass(frozen=True)
 class LogIssue:
     """A whole-log plausibility finding: ``error`` (the log cannot be right) or ``warning``."""
@@ -314,9 +325,11 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
     r = ranges_for(robot)
     w = r.weight_n
     out: list[LogIssue] = []
+    if len(df) > _CHECK_ROWS:  # statistics of the whole log: evenly spaced rows suffice
+        df = df.iloc[:: len(df) // _CHECK_ROWS]
     fcols = [c for c in df.columns if c.startswith("force_")]
     if fcols:
-        f = df[fcols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+        f = df[fcols].pipe(_numeric)
         ok = np.isfinite(f).all(axis=1)
         if ok.sum() >= 10:
             ratio = float(np.median(f[ok].sum(axis=1))) / w
@@ -333,7 +346,7 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
             out.extend(_wrong_foot(df, w))
     acols = [f"imu_acc_{a}" for a in "xyz"]
     if all(c in df.columns for c in acols):
-        a = df[acols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+        a = df[acols].pipe(_numeric)
         n = np.linalg.norm(a[np.isfinite(a).all(axis=1)], axis=1)
         if n.size >= 10:
             med = float(np.median(n))
@@ -360,7 +373,7 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
                 "degrees? convert the joint angles to rad")))
     qcols = [f"imu_quat_{a}" for a in "wxyz"]
     if all(c in df.columns for c in qcols):
-        q = df[qcols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+        q = df[qcols].pipe(_numeric)
         q = q[np.isfinite(q).all(axis=1)]
         if len(q) >= 10:
             norm = float(np.median(np.linalg.norm(q, axis=1)))
@@ -378,7 +391,7 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
 
 def _wrong_foot(df: pd.DataFrame, weight: float) -> list[LogIssue]:
     out = []
-    f = {s: df[[f"force_{s}{k}" for k in range(1, 5)]].to_numpy(dtype=float) for s in "rl"}
+    f = {s: _numeric(df[[f"force_{s}{k}" for k in range(1, 5)]]) for s in "rl"}
     # a foot swings when at least three of its four sensors read ~0 (one may be misplaced)
     air = {s: (np.abs(f[s]) < 0.01 * weight).sum(axis=1) >= 3 for s in "rl"}
     for side, other in (("r", "l"), ("l", "r")):
