@@ -231,6 +231,12 @@ def test_truncated_csv_is_refused(walk, tmp_path) -> None:
     plain.write_bytes(text[: len(text) - 200])
     with pytest.raises(LogFormatError, match=r"last row \(row 49\) has \d+ of \d+ fields"):
         read_log(plain)
+    # a row damaged in the middle (one field lost) is not padded with NaN either
+    lines = text.decode().splitlines(keepends=True)
+    lines[11] = lines[11].replace(",", "", 1)
+    plain.write_text("".join(lines))
+    with pytest.raises(LogFormatError, match=r"row 10 \(line 12\) has \d+ of \d+ fields"):
+        read_log(plain)
 
 
 # --------------------------------------------------------------- row 9: one clear line
@@ -406,3 +412,57 @@ def test_json_dump_of_warning_free_read(walk) -> None:
         df = read_log(walk)
     assert "time_gaps" not in df.attrs
     json.dumps(df.attrs)  # metadata stays JSON
+
+
+# ---------------------------------------------------------- row 6/11: units on load
+@pytest.mark.parametrize(
+    ("change", "needle"),
+    [
+        ("kgf", "they look like kgf: multiply by 9.80665"),
+        ("degrees", "degrees? convert the joint angles to rad"),
+        ("g", "the acceleration looks like g"),
+    ],
+)
+def test_unit_mistakes_are_refused_with_the_fix(walk, tmp_path, change, needle) -> None:
+    df = read_log(walk)
+    if change == "kgf":
+        cols = [c for c in df.columns if c.startswith("force_")]
+        df[cols] = df[cols] / 9.80665
+    elif change == "degrees":
+        cols = [c for c in df.columns if c.startswith("q_")]
+        df[cols] = np.degrees(df[cols])
+    else:
+        cols = ["imu_acc_x", "imu_acc_y", "imu_acc_z"]
+        df[cols] = df[cols] / 9.80665
+    p = tmp_path / "units.csv"
+    write_log(df, p)
+    before = _digest(p)
+    out = tmp_path / "o.parquet"
+    line = _one_error_line(runner.invoke(app, ["run", str(p), "-o", str(out)]))
+    assert needle in line and str(p) in line and "--no-unit-check" in line
+    assert not out.exists() and _digest(p) == before
+    res = runner.invoke(app, ["run", str(p), "-o", str(out), "--no-unit-check"])
+    assert res.exit_code == 0, res.output
+
+
+# ------------------------------------------------- row 10: no misleading exit 0 (CLI part)
+def test_commands_that_need_truth_or_a_run_say_so(walk, tmp_path) -> None:
+    line = _one_error_line(runner.invoke(app, ["report", str(walk), "-o",
+                                               str(tmp_path / "r.html")]))
+    assert "never run" in line and "grfguard run" in line
+    assert not (tmp_path / "r.html").exists()
+    df = read_log(walk)
+    df = df.drop(columns=[c for c in df.columns if c.startswith("true_")])
+    no_truth = write_log(df, tmp_path / "no_truth.parquet")
+    out = tmp_path / "o.parquet"
+    assert runner.invoke(app, ["run", str(no_truth), "-o", str(out)]).exit_code == 0
+    line = _one_error_line(runner.invoke(app, ["evaluate", str(out)]))
+    assert "no truth" in line
+
+
+def test_fault_outside_the_log_is_refused(walk, tmp_path) -> None:
+    out = tmp_path / "f.parquet"
+    line = _one_error_line(runner.invoke(app, ["inject", str(walk), "-o", str(out),
+                                               "--fault", "r1=offset:10@50"]))
+    assert "outside the log" in line and "nothing would be injected" in line
+    assert not out.exists()

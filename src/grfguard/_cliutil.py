@@ -37,6 +37,7 @@ __all__ = [
     "resolve_robot",
     "robot_for_log",
     "shipped_robot_names",
+    "check_log_plausible",
     "ROBOT_HELP",
 ]
 
@@ -321,3 +322,31 @@ def robot_for_log(df: Any, robot: Any, where: str, option: str = "--robot") -> A
             f"ROBOT.toml` and edit it) or {option} NAME ({', '.join(shipped_robot_names())})"
         )
     return None
+
+
+def check_log_plausible(df: Any, robot: Any, where: str) -> None:
+    """Refuse a log whose units or sensor wiring cannot be right for ``robot`` (forces in
+    kN/kgf, acceleration in g, angles in degrees, a sensor on the wrong foot); warn about
+    doubtful ones. ``robot`` None means the robot of ``df.attrs``."""
+    from grfguard.io.plausibility import check_log
+    from grfguard.model.robot import RobotConfig
+
+    if robot is None:
+        meta = df.attrs.get("robot")
+        if isinstance(meta, str):
+            import json
+
+            meta = json.loads(meta)
+        if not isinstance(meta, Mapping):
+            return
+        robot = RobotConfig.from_dict(dict(meta))
+    issues = check_log(df, robot)
+    for issue in issues:
+        if issue.severity != "error":
+            warnings.warn(f"{where}: {issue.message}", GrfguardWarning, stacklevel=2)
+    errors = [i for i in issues if i.severity == "error"]
+    if errors:
+        more = f" (and {len(errors) - 1} more finding(s))" if len(errors) > 1 else ""
+        raise LogFormatError(
+            f"{where}: {errors[0].message}{more}; if the log is right, pass --no-unit-check"
+        )

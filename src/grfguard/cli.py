@@ -139,6 +139,14 @@ def inject(
         raise FaultSpecError("no fault given: use --fault r2=offset:100@5 or --faults FILE.toml")
     check_output(output, inputs=[log, faults_file], what="faulty log")
     df = read_log(log)
+    t0, t1 = float(df["time"].iloc[0]), float(df["time"].iloc[-1])
+    for spec in specs:
+        if spec.start > t1 or spec.end <= t0:
+            raise FaultSpecError(
+                f"fault {spec.sensor}={spec.kind}@{spec.start:g}: it lies outside the log "
+                f"{log} (time {t0:g} s to {t1:g} s), so nothing would be injected; give a "
+                "start time inside the log"
+            )
     faulty = inject_faults(df, specs, seed=seed)
     write_log(faulty, output)
     _say(f"wrote {output} with {len(specs)} fault(s)")
@@ -175,17 +183,26 @@ def run(
             "split (run each increasing segment on its own).",
         ),
     ] = "strict",
+    unit_check: Annotated[
+        bool,
+        typer.Option(
+            "--unit-check/--no-unit-check",
+            help="Refuse forces in kN/kgf, acceleration in g, angles in degrees, a sensor "
+            "on the wrong foot.",
+        ),
+    ] = True,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
+    from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.logio import load_log, write_log
     from grfguard.io.safe import check_output
 
     rob = _check_run_inputs(config, thresholds, robot)
     check_output(output, inputs=[log, config, thresholds, robot], what="output log")
     df = load_log(log, time_order=time_order)
-    from grfguard._cliutil import robot_for_log
-
     robot_for_log(df, rob, str(log))
+    if unit_check:
+        check_log_plausible(df, rob, str(log))
     result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
     write_log(result, output)
     _say(f"wrote {output}: {len(result)} samples")
@@ -247,13 +264,27 @@ def _run_monitor(
 def evaluate(
     log: Annotated[Path, typer.Argument(help="Output of `grfguard run`.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    robot: Annotated[
+        str | None, typer.Option(help=ROBOT_HELP + " Overrides the log's metadata.")
+    ] = None,
 ) -> None:
     """Accuracy of the virtual sensor and of detection against the truth columns."""
+    from grfguard._cliutil import resolve_robot
+    from grfguard.errors import LogFormatError
     from grfguard.evaluate.frame import evaluate_frame
     from grfguard.io.logio import read_log
 
+    rob = resolve_robot(robot)
     df = read_log(log)
+    if rob is not None:
+        df.attrs["robot"] = rob.to_dict()
     result = evaluate_frame(df)
+    if "vfs" not in result and "detection" not in result:
+        raise LogFormatError(
+            f"{log} has no truth to evaluate against (no true_force_* or fault_* columns): "
+            "evaluate needs a simulated log (`grfguard simulate`, `grfguard inject`) run "
+            "through `grfguard run`"
+        )
     if as_json:
         from grfguard.io.logio import to_jsonable
 
@@ -340,19 +371,31 @@ def report(
         Path | None, typer.Option("-o", "--output", help="HTML report to write.")
     ] = None,
     png: Annotated[Path | None, typer.Option("--png", help="Directory for PNG figures.")] = None,
+    robot: Annotated[
+        str | None, typer.Option(help=ROBOT_HELP + " Overrides the log's metadata.")
+    ] = None,
 ) -> None:
     """Write a standalone HTML report and/or PNG figures of a run."""
-    from grfguard.errors import ConfigError
+    from grfguard._cliutil import resolve_robot
+    from grfguard.errors import ConfigError, LogFormatError
     from grfguard.io.logio import read_log
     from grfguard.io.safe import atomic_path, check_output, check_output_dir
 
     if output is None and png is None:
         raise ConfigError("nothing to write: give -o REPORT.html and/or --png DIR")
+    rob = resolve_robot(robot)
     if output is not None:
         check_output(output, inputs=[log], what="HTML report")
     if png is not None:
         check_output_dir(png, inputs=[log], what="figure directory", option="--png")
     df = read_log(log)  # the report computes the metrics of `grfguard evaluate` itself
+    if rob is not None:
+        df.attrs["robot"] = rob.to_dict()
+    if not any(str(c).startswith("flag_") for c in df.columns):
+        raise LogFormatError(
+            f"{log} has no flag_* columns: it was never run; report the output of "
+            f"`grfguard run {log} -o OUT.parquet`"
+        )
     if output is not None:
         from grfguard.report.html import write_html_report
 

@@ -292,12 +292,45 @@ def _check_csv_complete(path: Path, df: pd.DataFrame, rows: Any, written_by_us: 
                 f"{path}: the last row (row {len(df) - 1}) has {len(fields)} of {ncols} "
                 f"fields; {fix}"
             )
+    if ncols > 1:
+        _check_csv_field_counts(path, ncols, len(df), skip=1 if written_by_us else 0, fix=fix)
     if written_by_us and not ends_with_newline:
         raise LogFormatError(f"{path}: the last row (row {len(df) - 1}) is cut short; {fix}")
     if isinstance(rows, int) and not isinstance(rows, bool) and rows != len(df):
         raise LogFormatError(
             f"{path}: has {len(df)} rows but its metadata says {rows}; {fix}"
         )
+
+
+def _check_csv_field_counts(path: Path, ncols: int, nrows: int, skip: int, fix: str) -> None:
+    """Every row must have as many fields as the header (pandas pads a short row with NaN).
+
+    Counts the separators of the whole file in large chunks; only when the count is off
+    does it look for the first bad row. Files with quoted fields are left to pandas."""
+    commas = 0
+    quoted = False
+    with path.open("rb") as fh:
+        for _ in range(skip):
+            fh.readline()
+        for chunk in iter(lambda: fh.read(1 << 24), b""):
+            commas += chunk.count(b",")
+            quoted = quoted or b'"' in chunk
+    if quoted or commas == (ncols - 1) * (nrows + 1):
+        return
+    with path.open("rb") as fh:
+        for _ in range(skip + 1):
+            fh.readline()
+        row = 0
+        for line in fh:
+            if not line.strip():
+                continue
+            n = line.count(b",") + 1
+            if n != ncols:
+                raise LogFormatError(
+                    f"{path}: row {row} (line {row + skip + 2}) has {n} of {ncols} fields; "
+                    f"{fix if row == nrows - 1 else 'the file is damaged; re-export it'}"
+                )
+            row += 1
 
 
 def _repair_time(df: pd.DataFrame, time_order: str, where: str) -> pd.DataFrame:

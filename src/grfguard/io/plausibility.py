@@ -47,6 +47,8 @@ __all__ = [
     "ranges_for",
     "force_range",
     "clamp_recovered",
+    "check_log",
+    "LogIssue",
     "G",
 ]
 
@@ -277,3 +279,132 @@ def clamp_recovered(values: Any, robot: Any, nan: float | None = None) -> Any:
     if nan is not None:
         arr = np.where(np.isnan(arr), nan, arr)
     return arr
+
+
+# --------------------------------------------------------------------- whole-log checks
+#: Force-sum to weight ratios of common unit mistakes (the sum is in N when this is 1).
+_FORCE_UNITS = (("kN", 1e-3), ("kgf", 1.0 / G), ("lbf", 0.224809), ("daN", 0.1))
+
+
+#: Rows used by :func:`check_log` at most (evenly spaced).
+_CHECK_ROWS = 100_000
+
+
+def _numeric(frame: pd.DataFrame) -> np.ndarray:
+    """``frame`` as a float array, text that is not a number as NaN."""
+    if all(pd.api.types.is_numeric_dtype(t) for t in frame.dtypes):
+        return frame.to_numpy(dtype=float)
+    return frame.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+
+
+@dataclass(frozen=True)
+class LogIssue:
+    """A whole-log plausibility finding: ``error`` (the log cannot be right) or ``warning``."""
+
+    severity: str
+    column: str
+    message: str
+
+
+def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
+    """Unit and wiring mistakes visible in a whole log, checked against ``robot``.
+
+    * forces in kN, kgf, lbf or daN: the median of the summed sensor forces is compared
+      with the weight m g (error near one of these units' ratios or below 0.2 or above 5
+      weights, warning otherwise outside 0.6-1.6: a robot partly held by a harness);
+    * acceleration in g, or with gravity removed: the median |imu_acc| must be near g;
+    * joint angles in degrees: a joint beyond its limits (default +-pi) in >= 1 % of rows;
+    * IMU quaternion: not unit norm (error), or a 180 deg yaw that x-y-z-w order gives
+      (warning);
+    * a force sensor on the wrong foot: loaded while its own foot's three other sensors
+      read nothing and unloaded while the other foot is in the air.
+
+    Rows with NaN are ignored; isolated glitches are left to the monitor. Returns the
+    findings (empty when the log looks right).
+    """
+    r = ranges_for(robot)
+    w = r.weight_n
+    out: list[LogIssue] = []
+    if len(df) > _CHECK_ROWS:  # statistics of the whole log: evenly spaced rows suffice
+        df = df.iloc[:: len(df) // _CHECK_ROWS]
+    fcols = [c for c in df.columns if c.startswith("force_")]
+    if fcols:
+        f = df[fcols].pipe(_numeric)
+        ok = np.isfinite(f).all(axis=1)
+        if ok.sum() >= 10:
+            ratio = float(np.median(f[ok].sum(axis=1))) / w
+            if not 0.6 <= ratio <= 1.6:
+                guess = min(_FORCE_UNITS, key=lambda u: abs(math.log(max(ratio, 1e-12) / u[1])))
+                near = abs(math.log(max(ratio, 1e-12) / guess[1])) < 0.25
+                hint = (f"they look like {guess[0]}: multiply by {1 / guess[1]:.6g} to get N"
+                        if near else "check the units (N) and the robot's mass (--robot)")
+                sev = "error" if (near or ratio < 0.2 or ratio > 5.0) else "warning"
+                out.append(LogIssue(sev, "force_*", (
+                    f"the force sensors sum to {ratio * w:.4g} on average (median), but the "
+                    f"robot weighs {w:.4g} N ({ratio:.3g} weights); {hint}")))
+        if all(f"force_{s}{k}" in df.columns for s in "rl" for k in range(1, 5)):
+            out.extend(_wrong_foot(df, w))
+    acols = [f"imu_acc_{a}" for a in "xyz"]
+    if all(c in df.columns for c in acols):
+        a = df[acols].pipe(_numeric)
+        n = np.linalg.norm(a[np.isfinite(a).all(axis=1)], axis=1)
+        if n.size >= 10:
+            med = float(np.median(n))
+            if 0.5 <= med <= 2.0:
+                out.append(LogIssue("error", "imu_acc_*", (
+                    f"the median |imu_acc| is {med:.3g}: the acceleration looks like g; "
+                    f"multiply by {G} to get m/s^2")))
+            elif not 5.0 <= med <= 20.0:
+                out.append(LogIssue("error", "imu_acc_*", (
+                    f"the median |imu_acc| is {med:.3g} m/s^2, expected about {G} (the "
+                    "accelerometer's specific force, gravity included); check the units and "
+                    "that gravity was not removed")))
+    for c in [c for c in df.columns if c.startswith("q_")]:
+        lim = r.limits(c)
+        v = pd.to_numeric(df[c], errors="coerce").to_numpy(dtype=float)
+        v = v[np.isfinite(v)]
+        if lim is None or v.size < 10:
+            continue
+        frac = float(np.mean((v < lim[0]) | (v > lim[1])))
+        if frac >= 0.01:
+            out.append(LogIssue("error", c, (
+                f"{c} is outside its limits [{lim[0]:.4g}, {lim[1]:.4g}] rad in "
+                f"{100 * frac:.3g} % of the rows (max |{c}| = {np.abs(v).max():.4g}); "
+                "degrees? convert the joint angles to rad")))
+    qcols = [f"imu_quat_{a}" for a in "wxyz"]
+    if all(c in df.columns for c in qcols):
+        q = df[qcols].pipe(_numeric)
+        q = q[np.isfinite(q).all(axis=1)]
+        if len(q) >= 10:
+            norm = float(np.median(np.linalg.norm(q, axis=1)))
+            if abs(norm - 1.0) > r.quat_norm_tol:
+                out.append(LogIssue("error", "imu_quat_*", (
+                    f"the IMU quaternion's median norm is {norm:.4g}, not 1; give a unit "
+                    "quaternion (imu_quat_w, _x, _y, _z)")))
+            elif (np.median(np.abs(q[:, 0])) < 0.2 and np.median(np.abs(q[:, 3])) > 0.9):
+                out.append(LogIssue("warning", "imu_quat_*", (
+                    "the IMU quaternion is a 180 deg yaw for most of the log (imu_quat_w ~ 0, "
+                    "imu_quat_z ~ 1): if your IMU writes x-y-z-w, reorder the columns to "
+                    "w-x-y-z")))
+    return out
+
+
+def _wrong_foot(df: pd.DataFrame, weight: float) -> list[LogIssue]:
+    out = []
+    f = {s: _numeric(df[[f"force_{s}{k}" for k in range(1, 5)]]) for s in "rl"}
+    # a foot swings when at least three of its four sensors read ~0 (one may be misplaced)
+    air = {s: (np.abs(f[s]) < 0.01 * weight).sum(axis=1) >= 3 for s in "rl"}
+    for side, other in (("r", "l"), ("l", "r")):
+        if air[side].sum() < 20 or air[other].sum() < 20:
+            continue
+        for k in range(4):
+            v = f[side][:, k]
+            in_own_air = float(np.nanmean(v[air[side]]))
+            in_other_air = float(np.nanmean(np.abs(v[air[other]])))
+            if in_own_air > 0.1 * weight and in_other_air < 0.02 * weight:
+                col = f"force_{side}{k + 1}"
+                out.append(LogIssue("error", col, (
+                    f"{col} carries {in_own_air:.4g} N on average while foot '{side}' is in "
+                    f"the air (its other sensors read ~0) and ~0 while foot '{other}' is: it "
+                    f"looks like a sensor of foot '{other}'; check the column mapping")))
+    return out
