@@ -167,7 +167,7 @@ def inject(
 @app.command()
 @_friendly
 def run(
-    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV).")],
+    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV) or ROS bag.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Output log to write.")],
     config: Annotated[Path | None, typer.Option(help="Monitor/VFS config TOML.")] = None,
     thresholds: Annotated[Path | None, typer.Option(help="Thresholds TOML (calibrate).")] = None,
@@ -182,11 +182,15 @@ def run(
             "--method paper, ours otherwise."
         ),
     ] = None,
+    topics_map: Annotated[
+        Path | None, typer.Option("--map", help="Topics map TOML for a ROS bag input.")
+    ] = None,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
-    from grfguard.io.logio import load_log, write_log
+    from grfguard.io.anyread import read_any
+    from grfguard.io.logio import write_log
 
-    df = load_log(log)
+    df = read_any(log, topics_map)
     result = _run_monitor(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
     write_log(result, output)
     console.print(f"wrote {output}: {len(result)} samples")
@@ -400,6 +404,11 @@ def demo(
     from grfguard.demo import run_demo
 
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
+
+
+from grfguard.cli_ros import register as _register_ros  # noqa: E402
+
+_register_ros(app, _friendly)
 
 
 def main() -> None:

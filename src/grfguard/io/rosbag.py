@@ -243,14 +243,131 @@ def is_bag(path: str | Path) -> bool:
 class _Topic:
     name: str
     msgtype: str
-    raws: list[bytes]
+    packed: _cdr.Packed
     recv_ns: np.ndarray
     ros1: bool
+    groups: list[_cdr.Group] | None = None
+
+    @property
+    def raws(self) -> list[bytes]:
+        return [self.packed.get(i) for i in range(len(self.packed))]
+
+    def first(self) -> bytes:
+        return self.packed.get(0)
 
 
-def read_raw(path: str | Path, topics: list[str]) -> tuple[dict[str, _Topic], Any, dict]:
+def _storage_files(path: Path) -> list[Path] | None:
+    """The storage files of a bag if all are plain ``.mcap`` or all ``.db3``, else None."""
+    files = sorted(q for q in path.iterdir() if q.is_file()) if path.is_dir() else [path]
+    files = [q for q in files if q.suffix in (".mcap", ".db3")]
+    if not files or len({q.suffix for q in files}) != 1:
+        return None
+    return files
+
+
+def _raw_mcap(files: list[Path], topics: list[str]
+              ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
+    """Messages of ``topics`` from indexed MCAP files, vectorised: the chunk and message
+    indexes give every message's offset, so no record is parsed one by one. None if a
+    file has no chunk or message index (then the caller reads message by message)."""
+    from mcap.reader import make_reader
+
+    blobs: list[bytes] = []
+    base = 0
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {t: [] for t in topics}
+    u64, u32 = np.dtype("<u8"), np.dtype("<u4")
+    for f in files:
+        with f.open("rb") as fh:
+            summary = make_reader(fh).get_summary()
+            if summary is None or not summary.chunk_indexes:
+                return None
+            chans = {cid: ch.topic for cid, ch in summary.channels.items() if ch.topic in parts}
+            for ci in summary.chunk_indexes:
+                wanted = [c for c in ci.message_index_offsets if c in chans]
+                if not wanted:
+                    continue
+                if ci.compression not in ("", "zstd", "lz4"):
+                    return None
+                fh.seek(ci.chunk_start_offset)
+                blob = fh.read(ci.chunk_length + ci.message_index_length)
+                p = 9 + 16
+                usize = int(np.frombuffer(blob, u64, 1, p)[0])
+                p += 12
+                clen = int(np.frombuffer(blob, u32, 1, p)[0])
+                p += 4 + clen
+                rlen = int(np.frombuffer(blob, u64, 1, p)[0])
+                data = blob[p + 8 : p + 8 + rlen]
+                if ci.compression == "zstd":
+                    import zstandard
+
+                    data = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
+                elif ci.compression == "lz4":
+                    import lz4.frame
+
+                    data = lz4.frame.decompress(data)
+                blobs.append(data)
+                rec = np.frombuffer(data, dtype=np.uint8)
+                for c in wanted:
+                    mo = ci.message_index_offsets[c] - ci.chunk_start_offset
+                    nb = int(np.frombuffer(blob, u32, 1, mo + 11)[0])
+                    pairs = np.frombuffer(blob, u64, nb // 8, mo + 15).reshape(-1, 2)
+                    offs = pairs[:, 1].astype(np.int64)
+                    if offs.size and (rec[offs] != 0x05).any():
+                        return None  # the index does not point at message records
+                    rl = rec[offs[:, None] + 1 + np.arange(8)].copy().view(u64)[:, 0]
+                    parts[chans[c]].append((offs + 31 + base, rl.astype(np.int64) - 22,
+                                            pairs[:, 0].astype(np.int64)))
+                base += rec.size
+    joined = b"".join(blobs)
+    buf = np.frombuffer(joined, dtype=np.uint8)
+    out = {}
+    for t, ps in parts.items():
+        if not ps:
+            out[t] = (_cdr.Packed(buf, np.zeros(0, np.int64), np.zeros(0, np.int64), joined),
+                      np.zeros(0, np.int64))
+            continue
+        offs, lens, ts = (np.concatenate(x) for x in zip(*ps, strict=True))
+        out[t] = (_cdr.Packed(buf, offs, lens, joined), ts)
+    return out
+
+
+def _raw_sqlite(files: list[Path], topics: list[str]
+                ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
+    """Messages of ``topics`` from rosbag2 sqlite3 files with one query per file."""
+    import sqlite3
+
+    raws: dict[str, list[bytes]] = {t: [] for t in topics}
+    times: dict[str, list[int]] = {t: [] for t in topics}
+    for f in files:
+        con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+        try:
+            ids = {i: n for n, i in con.execute("SELECT name, id FROM topics") if n in raws}
+            if not ids:
+                continue
+            q = ",".join("?" * len(ids))
+            rows = con.execute(
+                f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({q}) "
+                "ORDER BY timestamp", list(ids)).fetchall()
+        except sqlite3.DatabaseError:
+            return None
+        finally:
+            con.close()
+        for tid, name in ids.items():
+            sel = [r for r in rows if r[0] == tid]
+            raws[name].extend(r[2] for r in sel)
+            times[name].extend(r[1] for r in sel)
+    return {t: (_cdr.Packed.from_list(raws[t]), np.asarray(times[t], dtype=np.int64))
+            for t in topics}
+
+
+def read_raw(path: str | Path, topics: list[str], fast: bool = True
+             ) -> tuple[dict[str, _Topic], Any, dict]:
     """Serialised messages of ``topics`` (only those are read), their typestore and the
     bag's grfguard metadata (``custom_data``), if any.
+
+    With ``fast`` (default), MCAP files are read through their indexes and sqlite3
+    files with one query; otherwise (and for ROS 1 or compressed bags) message by
+    message through ``rosbags``.
 
     Raises:
         LogFormatError: The bag cannot be read, or a topic is not in it (the message
@@ -282,19 +399,26 @@ def read_raw(path: str | Path, topics: list[str]) -> tuple[dict[str, _Topic], An
             types = {c.msgtype for c in by_topic[t]}
             if len(types) > 1:
                 raise LogFormatError(f"bag {path}: topic {t} has several types {sorted(types)}")
-        cid = {c.id: c.topic for c in conns}
-        raws: dict[str, list[bytes]] = {t: [] for t in topics}
-        recv: dict[str, list[int]] = {t: [] for t in topics}
-        for conn, ts, raw in reader.messages(connections=conns):
-            t = cid[conn.id]
-            raws[t].append(raw)
-            recv[t].append(ts)
         ros1 = not reader.is2
-        out = {
-            t: _Topic(t, by_topic[t][0].msgtype, raws[t], np.asarray(recv[t], dtype=np.int64),
-                      ros1)
-            for t in topics
-        }
+        got = None
+        files = _storage_files(path) if fast and not ros1 else None
+        if files is not None:
+            compressed = any(getattr(r, "compression_mode", None) for r in reader.readers)
+            if not compressed:
+                reader_fn = _raw_mcap if files[0].suffix == ".mcap" else _raw_sqlite
+                got = reader_fn(files, topics)
+        if got is None:
+            cid = {c.id: c.topic for c in conns}
+            raws: dict[str, list[bytes]] = {t: [] for t in topics}
+            recv: dict[str, list[int]] = {t: [] for t in topics}
+            for conn, ts, raw in reader.messages(connections=conns):
+                t = cid[conn.id]
+                raws[t].append(raw)
+                recv[t].append(ts)
+            got = {t: (_cdr.Packed.from_list(raws[t]), np.asarray(recv[t], dtype=np.int64))
+                   for t in topics}
+        out = {t: _Topic(t, by_topic[t][0].msgtype, got[t][0], got[t][1], ros1)
+               for t in topics}
         meta: dict[str, Any] = {}
         for r in getattr(reader, "readers", []):
             custom = getattr(getattr(getattr(r, "storage", None), "metadata", None),
@@ -317,10 +441,10 @@ def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
     With ``want_names`` also the ``name`` list per message group (JointState); a
     sequence whose length changes between messages is padded with NaN.
     """
-    n = len(top.raws)
+    n = len(top.packed)
     if n == 0:
         raise LogFormatError(f"topic {top.name} has no messages")
-    first = _cdr.layout_of(top.raws[0], top.msgtype, typestore, top.ros1)
+    first = _cdr.layout_of(top.first(), top.msgtype, typestore, top.ros1)
     for p in paths:
         if p not in first.leaves:
             numeric = ", ".join(k for k in first.leaves if not k.startswith("header."))
@@ -332,7 +456,9 @@ def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
         return _decode_per_message(top, typestore, paths, want_names)
     out: dict[str, np.ndarray] = {}
     names: list[list[str]] | None = [[] for _ in range(n)] if want_names else None
-    groups = _cdr.split_groups(top.raws, top.msgtype, typestore, top.ros1)
+    if top.groups is None:
+        top.groups = _cdr.split_groups(top.packed, top.msgtype, typestore, top.ros1)
+    groups = top.groups
     for g in groups:
         for p in paths:
             v = _cdr.field(g, p)
@@ -387,7 +513,9 @@ def _times(top: _Topic, typestore: Any, stamps: str, vectorised: bool
            ) -> tuple[np.ndarray, str]:
     """Message times [ns] and which kind they are."""
     if stamps == "header":
-        lay = _cdr.layout_of(top.raws[0], top.msgtype, typestore, top.ros1)
+        if not len(top.packed):
+            raise LogFormatError(f"topic {top.name} has no messages")
+        lay = _cdr.layout_of(top.first(), top.msgtype, typestore, top.ros1)
         if _STAMP_SEC in lay.leaves:
             v, _ = _decode(top, typestore, [_STAMP_SEC, _STAMP_NSEC], vectorised)
             ns = v[_STAMP_SEC].astype(np.int64) * 1_000_000_000 + v[_STAMP_NSEC].astype(
@@ -445,6 +573,7 @@ def read_bag(
     topics_map: TopicsMap | str | Path | None = None,
     *,
     vectorised: bool = True,
+    fast_read: bool | None = None,
 ) -> pd.DataFrame:
     """A grfguard log from a ROS bag.
 
@@ -453,10 +582,13 @@ def read_bag(
         topics_map: A :class:`TopicsMap`, a TOML path, or None for the example map.
         vectorised: Decode with numpy (default); False deserialises every message with
             ``rosbags`` (the reference, same result, much slower).
+        fast_read: Read raw messages through the MCAP index / one sqlite query
+            (default: as ``vectorised``); False reads them one by one with ``rosbags``.
 
     Returns:
-        The log: ``time`` [s since the first grid row], IMU, joints, forces, extra
-        columns, ``import_gap`` (bool); import details in ``attrs["ros_import"]``.
+        The log: ``time`` [s since the first IMU message, at ``attrs["ros_import"]
+        ["t0_ns"]``], IMU, joints, forces, extra columns, ``import_gap`` (bool); import
+        details in ``attrs["ros_import"]``.
 
     Raises:
         LogFormatError: Missing topic or field, unknown joint names, a topic too slow
@@ -465,7 +597,8 @@ def read_bag(
     if topics_map is None:
         topics_map = EXAMPLE_MAP
     tmap = topics_map if isinstance(topics_map, TopicsMap) else load_topics_map(topics_map)
-    raw, typestore, meta = read_raw(path, tmap.topics())
+    raw, typestore, meta = read_raw(
+        path, tmap.topics(), fast=vectorised if fast_read is None else fast_read)
     report: list[str] = []
     stamps_used: dict[str, str] = {}
 
@@ -526,7 +659,7 @@ def read_bag(
                           f"{b:.3f} s (no message); grid rows inside are NaN and flagged "
                           "import_gap")
 
-    cols: dict[str, np.ndarray] = {TIME: grid - grid[0]}
+    cols: dict[str, np.ndarray] = {TIME: grid}
     interp_used: dict[str, str] = {}
 
     def put(name: str, col: str, y: np.ndarray, how: str) -> None:
@@ -613,10 +746,10 @@ def read_bag(
     attrs["ros_import"] = {
         "bag": str(path),
         "rate_hz": rate,
-        "t0_ns": t0_ns + int(round(grid[0] * 1e9)),
+        "t0_ns": t0_ns,
         "stamps": stamps_used,
         "topic_rates_hz": rates,
-        "messages": {t: len(raw[t].raws) for t in raw},
+        "messages": {t: len(raw[t].packed) for t in raw},
         "interpolation": interp_used,
         "gaps": gaps,
         "decoder": "vectorised" if vectorised else "per-message",
