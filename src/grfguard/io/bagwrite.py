@@ -51,7 +51,10 @@ from grfguard.io.schema import (
 )
 from grfguard.model.robot import JOINT_NAMES, SIDES
 
-__all__ = ["write_bag", "BAG_TOPICS", "START_NS"]
+__all__ = ["write_bag", "BAG_TOPICS", "START_NS", "META_TOPIC"]
+
+#: Topic of one ``std_msgs/msg/String``: the log's metadata (robot, gait, faults) as JSON.
+META_TOPIC = "/grfguard/metadata"
 
 #: Topic -> message type of the bags :func:`write_bag` writes.
 BAG_TOPICS: dict[str, str] = {
@@ -274,6 +277,11 @@ def write_bag(
             meta = {k: v for k, v in log.attrs.items() if k != "source"}
             writer.set_custom_data("grfguard", json.dumps(_jsonable(meta), sort_keys=True))
             conns = [writer.add_connection(tp, v[0], typestore=ts) for tp, v in out.items()]
+            # the same metadata as a message: a single .mcap/.db3 file has no metadata.yaml
+            mconn = writer.add_connection(META_TOPIC, "std_msgs/msg/String", typestore=ts)
+            writer.write(mconn, int(recv_all.min()), bytes(ts.serialize_cdr(
+                ts.types["std_msgs/msg/String"](data=json.dumps(_jsonable(meta))),
+                "std_msgs/msg/String")))
             rows = [v[1] for v in out.values()]
             for k in order.tolist():
                 i = order_topic[k]

@@ -31,6 +31,7 @@ import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.io import _cdr
+from grfguard.io.bagwrite import META_TOPIC
 from grfguard.io.schema import IMU_ACC, IMU_GYRO, IMU_QUAT, TIME, force_col
 from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES
 
@@ -420,7 +421,14 @@ def read_raw(path: str | Path, topics: list[str], fast: bool = True
         out = {t: _Topic(t, by_topic[t][0].msgtype, got[t][0], got[t][1], ros1)
                for t in topics}
         meta: dict[str, Any] = {}
-        for r in getattr(reader, "readers", []):
+        if META_TOPIC in by_topic:  # written by grfguard's bag writer
+            for c, _, data in reader.messages(connections=by_topic[META_TOPIC]):
+                try:
+                    meta = json.loads(reader.deserialize(data, c.msgtype).data)
+                except (ValueError, AttributeError):
+                    meta = {}
+                break
+        for r in getattr(reader, "readers", []) if not meta else []:
             custom = getattr(getattr(getattr(r, "storage", None), "metadata", None),
                              "custom", None) or getattr(getattr(r, "metadata", None),
                                                         "custom", None)
