@@ -334,31 +334,105 @@ def _raw_mcap(files: list[Path], topics: list[str]
 
 def _raw_sqlite(files: list[Path], topics: list[str]
                 ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
-    """Messages of ``topics`` from rosbag2 sqlite3 files with one query per file."""
+    """Messages of ``topics`` from rosbag2 sqlite3 files: per file one query for topic
+    ids, times and lengths (as text, parsed by numpy) and one for the data, joined into
+    one buffer; no Python work per message beyond fetching its bytes."""
     import sqlite3
+    from operator import itemgetter
 
-    raws: dict[str, list[bytes]] = {t: [] for t in topics}
-    times: dict[str, list[int]] = {t: [] for t in topics}
+    blobs: list[bytes] = []
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {t: [] for t in topics}
+    base = 0
     for f in files:
         con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
         try:
-            ids = {i: n for n, i in con.execute("SELECT name, id FROM topics") if n in raws}
+            ids = {i: n for n, i in con.execute("SELECT name, id FROM topics") if n in parts}
             if not ids:
                 continue
-            q = ",".join("?" * len(ids))
-            rows = con.execute(
-                f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({q}) "
-                "ORDER BY timestamp", list(ids)).fetchall()
+            where = f"topic_id IN ({','.join('?' * len(ids))})"
+            tid_s, ts_s, len_s = con.execute(
+                "SELECT group_concat(topic_id), group_concat(timestamp), "
+                "group_concat(length(data)) FROM (SELECT topic_id, timestamp, data FROM "
+                f"messages WHERE {where} ORDER BY id)", list(ids)).fetchone()
+            rows = con.execute(f"SELECT data FROM messages WHERE {where} ORDER BY id",
+                               list(ids)).fetchall()
         except sqlite3.DatabaseError:
             return None
         finally:
             con.close()
-        for tid, name in ids.items():
-            sel = [r for r in rows if r[0] == tid]
-            raws[name].extend(r[2] for r in sel)
-            times[name].extend(r[1] for r in sel)
-    return {t: (_cdr.Packed.from_list(raws[t]), np.asarray(times[t], dtype=np.int64))
-            for t in topics}
+        if not rows:
+            continue
+        tid, tstamp, lens = (np.fromstring(x, dtype=np.int64, sep=",")
+                             for x in (tid_s, ts_s, len_s))
+        data = b"".join(map(itemgetter(0), rows))
+        if not (tid.size == tstamp.size == lens.size == len(rows)) or lens.sum() != len(data):
+            return None
+        offs = np.zeros(lens.size, dtype=np.int64)
+        np.cumsum(lens[:-1], out=offs[1:])
+        for i, name in ids.items():
+            sel = tid == i
+            parts[name].append((offs[sel] + base, lens[sel], tstamp[sel]))
+        blobs.append(data)
+        base += len(data)
+    joined = b"".join(blobs)
+    buf = np.frombuffer(joined, dtype=np.uint8)
+    out = {}
+    for t, ps in parts.items():
+        if ps:
+            o, ln, ts_ = (np.concatenate(x) for x in zip(*ps, strict=True))
+        else:
+            o = ln = ts_ = np.zeros(0, dtype=np.int64)
+        out[t] = (_cdr.Packed(buf, o, ln, joined), ts_)
+    return out
+
+
+def _sqlite_direct(path: Path, files: list[Path], topics: list[str]
+                   ) -> tuple[dict[str, _Topic], Any, dict] | None:
+    """sqlite3 storage without ``rosbags``' reader (which counts every topic's messages
+    on opening): topics and types from the ``topics`` table, standard ROS 2 message
+    definitions. None when a type is not standard or the file is not plain rosbag2."""
+    import sqlite3
+
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    types: dict[str, set[str]] = {}
+    try:
+        for f in files:
+            con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+            try:
+                for name, typ, fmt in con.execute(
+                        "SELECT name, type, serialization_format FROM topics"):
+                    if fmt != "cdr":
+                        return None
+                    types.setdefault(name, set()).add(typ)
+            finally:
+                con.close()
+    except sqlite3.DatabaseError:
+        return None
+    missing = [t for t in topics if t not in types]
+    if missing:
+        have = ", ".join(f"{t} ({sorted(v)[0]})" for t, v in sorted(types.items()))
+        raise LogFormatError(f"bag {path}: topic(s) {missing} not found; the bag has: {have}. "
+                             "Fix the topic names in the topics map.")
+    for t in topics:
+        if len(types[t]) > 1:
+            raise LogFormatError(f"bag {path}: topic {t} has several types {sorted(types[t])}")
+        if next(iter(types[t])) not in ts.fielddefs:
+            return None
+    want = [*topics, META_TOPIC] if META_TOPIC in types else topics
+    got = _raw_sqlite(files, want)
+    if got is None:
+        return None
+    meta: dict[str, Any] = {}
+    if META_TOPIC in got and len(got[META_TOPIC][0]):
+        try:
+            meta = json.loads(ts.deserialize_cdr(got[META_TOPIC][0].get(0),
+                                                 "std_msgs/msg/String").data)
+        except ValueError:
+            meta = {}
+    out = {t: _Topic(t, next(iter(types[t])), got[t][0], got[t][1], False) for t in topics}
+    return out, ts, meta
 
 
 def read_raw(path: str | Path, topics: list[str], fast: bool = True
@@ -379,6 +453,11 @@ def read_raw(path: str | Path, topics: list[str], fast: bool = True
     path = Path(path)
     if not path.exists():
         raise LogFormatError(f"bag {path} does not exist")
+    files = _storage_files(path) if fast else None
+    if files is not None and files[0].suffix == ".db3":
+        direct = _sqlite_direct(path, files, topics)
+        if direct is not None:
+            return direct
     try:
         reader = AnyReader([path])
         reader.open()
