@@ -156,7 +156,7 @@ def inject(
 @app.command()
 @_friendly
 def run(
-    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV).")],
+    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV) or ROS bag.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Output log to write.")],
     config: Annotated[Path | None, typer.Option(help="Monitor/VFS config TOML.")] = None,
     thresholds: Annotated[Path | None, typer.Option(help="Thresholds TOML (calibrate).")] = None,
@@ -191,15 +191,19 @@ def run(
             "on the wrong foot.",
         ),
     ] = True,
+    topics_map: Annotated[
+        Path | None, typer.Option("--map", help="Topics map TOML for a ROS bag input.")
+    ] = None,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
-    from grfguard.io.logio import load_log, write_log
+    from grfguard.io.anyread import read_any
+    from grfguard.io.logio import write_log
     from grfguard.io.safe import check_output
 
     rob = _check_run_inputs(config, thresholds, robot)
-    check_output(output, inputs=[log, config, thresholds, robot], what="output log")
-    df = load_log(log, time_order=time_order)
+    check_output(output, inputs=[log, config, thresholds, robot, topics_map], what="output log")
+    df = read_any(log, topics_map, time_order=time_order)
     robot_for_log(df, rob, str(log))
     if unit_check:
         check_log_plausible(df, rob, str(log))
@@ -444,6 +448,10 @@ from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
 
 app.add_typer(robot_app, name="robot")
 app.command("decimate")(decimate_cmd)
+
+from grfguard.cli_ros import register as _register_ros  # noqa: E402
+
+_register_ros(app, _friendly)
 
 
 def main() -> None:
