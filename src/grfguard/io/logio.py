@@ -223,6 +223,8 @@ def _check_metadata(meta: Any, path: Path) -> None:
             f"parameters, got {type(robot).__name__} {_short(repr(robot), 60)}; remove it "
             "and pass the robot with --robot ROBOT.toml"
         )
+    if "model" in robot:  # a described robot (Talos, G1, ...): checked by io.robot_schema
+        return
     from grfguard.errors import ConfigError
     from grfguard.model.robot import RobotConfig
 
