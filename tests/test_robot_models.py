@@ -161,3 +161,11 @@ def test_cli_robot_list_show_simulate_decimate(tmp_path) -> None:
     res = runner.invoke(app, ["decimate", str(out), "--rate", "300", "-o",
                               str(tmp_path / "x.parquet")])
     assert res.exit_code == 2 and "must divide" in res.output
+
+
+def test_talos_virtual_ft_accuracy_on_noisy_log(talos) -> None:
+    """Default sensor noise (IMU noise and bias, attitude error, 2^17-count encoders)."""
+    df = simulate_robot(talos, scaled_gait(talos, duration=6.0), NoiseConfig(), seed=3)
+    acc = evaluate_wrenches(df, estimate_wrenches(df, talos), talos)
+    assert acc["foot_fz"] <= 0.5 and acc["ft_fz"] <= 1.0
+    assert acc["ft_tx"] <= 1.0 and acc["ft_ty"] <= 1.0
