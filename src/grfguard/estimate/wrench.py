@@ -3,9 +3,10 @@
 The ground must supply what the whole body's motion and weight need. With the base
 at the origin (a free-floating body's dynamics does not depend on where it is), the
 base attitude from the IMU, the joints from the encoders, and the base velocity from
-the stance foot standing still (``v_B = -sum_i w_i d/dt p_i``, ``p_i`` the sole of foot
-``i`` relative to the base, ``w_i`` the planned stance weights), inverse dynamics gives
-the generalized force ``f = M(q) qdd + c(q, qd)`` (``mj_inverse``, contacts off). Its six
+the stance foot standing still (``v_B = -R_WB sum_i w_i (omega x p_i + d/dt p_i)``,
+``p_i`` the sole of foot ``i`` in base axes, ``w_i`` the planned stance weights),
+inverse dynamics gives
+the generalized force ``f = M(q) qdd + c(q, qd)`` (``mj_rne``). Its six
 free-joint rows are the ground's: a wrench ``w_i`` at sole ``i`` alone would need
 ``J_i,free^T w_i = f_free``. In single support the stance foot carries all of it; in
 double support the load is shared as the centre of pressure of the total wrench lies
@@ -29,8 +30,8 @@ mean tilt between it and the stance sole lying flat over ``level_window`` second
 attitude error of 0.1 deg moves the CoM of a 1 m tall robot 2 mm over its foot: 1 % of
 the ankle torque of a 20 cm foot).
 
-Derivatives: Savitzky-Golay (cubic) over ``window`` seconds (the base's angular
-acceleration over 2.5 ``window``), zero lag (offline, batch).
+The base's angular velocity is the gyro's; derivatives and smoothing are Savitzky-Golay
+(cubic) over ``window`` seconds, zero lag (offline, batch).
 """
 
 from __future__ import annotations
@@ -223,11 +224,10 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
     ft = robot.description.sensing == "ft"
     feet_b = [m.body(f.body).id for f in robot.description.feet]
     ft_sites = [m.site(f"{s}_ft").id for s in SIDES] if ft else []
-    saved = m.opt.disableflags
-    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     ground = np.zeros((2, n, 6))
     ft_out = np.zeros((2, n, 6))
     jac = np.zeros((6, m.nv))
+    f_rne = np.zeros(m.nv)
     try:
         for k in range(n):
             d.qpos[:3] = 0.0
@@ -235,8 +235,11 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
             d.qpos[jq] = q[k]
             d.qvel[:3], d.qvel[3:6], d.qvel[jv] = v_B[k], omega_B[k], qd[k]
             d.qacc[:3], d.qacc[3:6], d.qacc[jv] = a_B[k], alpha_B[k], qdd[k]
-            mujoco.mj_inverse(m, d)
-            f_free = d.qfrc_inverse[:6].copy()
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_rne(m, d, 1, f_rne)  # M qdd + c (the free rows have no armature)
+            f_free = f_rne[:6].copy()
             alone = np.empty((2, 6))
             for i, sid in enumerate(sites):
                 mujoco.mj_jacSite(m, d, jac[:3], jac[3:], sid)
@@ -259,7 +262,7 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
                     ft_out[i, k, :3] = -(R.T @ fo)
                     ft_out[i, k, 3:] = -(R.T @ tq_site)
     finally:
-        m.opt.disableflags = saved
+        d.xfrc_applied[:] = 0.0
     sensor: dict[str, np.ndarray] = {}
     if ft:
         for i, s in enumerate(SIDES):
