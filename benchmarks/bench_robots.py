@@ -36,7 +36,7 @@ SECTION = "## Robots from URDF (Talos, G1)"
 
 
 def walk_row(name: str, duration: float) -> list[str]:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if name == "suralp":
         from grfguard.model.robot import SURALP
 
@@ -48,10 +48,11 @@ def walk_row(name: str, duration: float) -> list[str]:
         df = simulate_robot(r, scaled_gait(r, duration=duration), NoiseConfig(), seed=0)
         fz = df["true_grf_r_z"] + df["true_grf_l_z"]
         mass, joints, gait = r.mass, len(r.joint_names), df.attrs["gait"]
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     ratio = fz.mean() / (mass * 9.81)
     return [name, str(joints), f"{mass:.2f}", f"{gait['step_length']:.3f}",
             f"{gait['step_period']:.3f}", f"{wall:.1f}", f"{duration / wall:.1f}",
+            f"{cpu:.1f}", f"{duration / cpu:.1f}",
             f"{ratio:.6f}", f"{df['true_trunk_tilt'].max():.2f}",
             f"{df['true_com_x'].iloc[-1]:.2f}"]
 
@@ -96,12 +97,14 @@ def main() -> None:
     body = "\n\n".join([
         f"Command: `.venv/bin/python benchmarks/bench_robots.py --duration {args.duration:g} "
         f"--wrench-duration {args.wrench_duration:g}` ({platform.processor() or 'cpu'}, "
-        "one core; the machine is shared, so wall times are upper bounds).",
+        "one core; the machine is shared by other jobs: wall times are upper bounds, CPU "
+        "times of this process are the fairer measure).",
         f"Walks of {args.duration:g} s, default noise, seed 0, the default gait scaled to "
         "each robot (step 0.12 m x L / 0.674 m, period 1 s x sqrt(L / 0.674 m), L = hip to "
         "sole). Wall time includes loading the URDF.",
         table(["robot", "joints", "mass [kg]", "step [m]", "period [s]", "wall [s]",
-               "x real time", "mean Fz / m g", "max tilt [deg]", "walked [m]"], walks),
+               "x real time", "CPU [s]",
+               "x real time (CPU)", "mean Fz / m g", "max tilt [deg]", "walked [m]"], walks),
         f"Virtual foot wrenches (`estimate_wrenches`, window 0.1 s) on {args.wrench_duration:g}"
         " s walks (seed 1), RMSE in single support (true contact, 50 ms from any contact "
         "change): foot Fz and corners in % of m g; F/T forces in % of m g, torques in % of "
