@@ -33,6 +33,7 @@ from grfguard.sim import GaitConfig, NoiseConfig, simulate  # noqa: E402
 from grfguard.sim.wholebody import decimate, scaled_gait, simulate_robot  # noqa: E402
 
 SECTION = "## Robots from URDF (Talos, G1)"
+ALL_ROWS: list[list[str]] = []
 
 
 def walk_row(name: str, duration: float) -> list[str]:
@@ -65,14 +66,20 @@ def wrench_rows(name: str, duration: float) -> list[list[str]]:
         for rate in (1000, 200, 100):
             d = df if rate == 1000 else decimate(df, rate)
             t0 = time.perf_counter()
-            acc = evaluate_wrenches(d, estimate_wrenches(d, r), r)
+            est = estimate_wrenches(d, r)
             el = time.perf_counter() - t0
+            acc = evaluate_wrenches(d, est, r)
+            al = evaluate_wrenches(d, est, r, phase="all")
             extra = (f"{acc['corner']:.2f}" if "corner" in acc else "-")
             ft = ([f"{acc['ft_fz']:.3f}", f"{max(acc['ft_fx'], acc['ft_fy']):.3f}",
                    f"{acc['ft_tx']:.3f}", f"{acc['ft_ty']:.3f}", f"{acc['ft_tz']:.3f}"]
                   if "ft_fz" in acc else ["-"] * 5)
             rows.append([name, label, str(rate), f"{acc['foot_fz']:.3f}", extra, *ft,
                          f"{len(d) / el:.0f}"])
+            ALL_ROWS.append([name, label, str(rate), f"{al['foot_fz']:.3f}",
+                             f"{al['corner']:.2f}" if "corner" in al else "-",
+                             f"{al['ft_fz']:.3f}" if "ft_fz" in al else "-",
+                             f"{max(al['ft_tx'], al['ft_ty']):.3f}" if "ft_tx" in al else "-"])
             print(rows[-1], flush=True)
     return rows
 
@@ -111,6 +118,11 @@ def main() -> None:
         "m g x foot length.",
         table(["robot", "log", "rate [Hz]", "foot Fz [%]", "worst corner [%]", "F/T fz [%]",
                "F/T fx,fy [%]", "F/T tx [%]", "F/T ty [%]", "F/T tz [%]", "samples/s"], wr),
+        "The same estimates over every sample after 0.5 s, both feet (double support, "
+        "swing and contact changes included): what a monitor's residual sees. For the "
+        "paper's scenario transposed, a fault of 9 % of m g is to be detected.",
+        table(["robot", "log", "rate [Hz]", "foot Fz [%]", "worst corner [%]", "F/T fz [%]",
+               "F/T tx, ty [%]"], ALL_ROWS),
     ])
     print(body)
     if not args.no_write:

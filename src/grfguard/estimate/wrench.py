@@ -316,14 +316,16 @@ def _corner_split(robot: LoadedRobot, i: int, ground: np.ndarray, R_WB: np.ndarr
 
 
 def evaluate_wrenches(df: pd.DataFrame, est: WrenchEstimate, robot: LoadedRobot,
-                      ss_margin_s: float = 0.05, t_start_s: float = 0.5) -> dict[str, float]:
+                      ss_margin_s: float = 0.05, t_start_s: float = 0.5,
+                      phase: str = "ss") -> dict[str, float]:
     """Single-support accuracy of ``est`` against the truth of a simulated log.
 
     Single support (as :func:`grfguard.evaluate.vfs_metrics.support_windows`): one foot
     loaded (true normal force > 1 N), the other not, no contact change within
     ``ss_margin_s``; errors on the stance foot after ``t_start_s``. Returns RMSEs in %:
     ``foot_fz`` of the weight m g; ``corner`` (worst corner) of m g; ``ft_f<xyz>`` of
-    m g and ``ft_t<xyz>`` of m g x foot length.
+    m g and ``ft_t<xyz>`` of m g x foot length. ``phase="all"``: every sample after
+    ``t_start_s`` on both feet (double support and swing included).
     """
     from grfguard.evaluate.vfs_metrics import _dilate
 
@@ -335,6 +337,10 @@ def evaluate_wrenches(df: pd.DataFrame, est: WrenchEstimate, robot: LoadedRobot,
     near = _dilate(change, int(round(ss_margin_s / dt)))
     ok = ~near & (t >= t_start_s)
     ss = [loaded[:, 0] & ~loaded[:, 1] & ok, loaded[:, 1] & ~loaded[:, 0] & ok]
+    if phase == "all":  # every sample after t_start_s, on both feet (swing included)
+        ss = [t >= t_start_s, t >= t_start_s]
+    elif phase != "ss":
+        raise ValueError(f"phase must be 'ss' or 'all', got {phase!r}")
     weight = robot.mass * float(-robot.model.opt.gravity[2])
     foot_len = robot.description.feet[0].length
     out: dict[str, float] = {"n_ss": float(ss[0].sum() + ss[1].sum())}
