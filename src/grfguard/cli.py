@@ -80,12 +80,12 @@ def simulate(
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard.cli_robot import is_described_robot, simulate_described
 
+    if robot is not None and str(robot) == "suralp":
+        robot = None  # SURALP keeps its dedicated simulation
     if is_described_robot(robot):
         simulate_described(robot, output, duration, step_length, step_period,
                            double_support, seed, noise, rate)
         return
-    if robot is not None and str(robot) == "suralp":
-        robot = None
     from grfguard.io.logio import write_log
     from grfguard.model.robot import load_robot
     from grfguard.sim import GaitConfig, NoiseConfig
