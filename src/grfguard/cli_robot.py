@@ -14,7 +14,9 @@ from typing import Annotated, Any
 
 import typer
 
-from grfguard.cli import _friendly, _progress, console, out
+from grfguard._term import cli_friendly as _friendly
+from grfguard._term import console, out
+from grfguard._term import progress as _progress
 
 __all__ = ["robot_app", "is_described_robot", "simulate_described", "decimate_cmd"]
 
