@@ -62,6 +62,8 @@ def simulate(
     from grfguard.sim.reality import load_reality
 
     check_seed(seed)
+    if robot is not None and str(robot) == "suralp":
+        robot = None  # SURALP keeps its dedicated simulation
     if is_described_robot(robot):
         check_output(output, inputs=[robot], what="log")
         simulate_described(robot, output, duration, step_length, step_period,
