@@ -274,7 +274,8 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     elif abs(nt - 1.0) > 1e-15:
         inv = 1.0 / nt
         tw, tx, ty, tz = tw * inv, tx * inv, ty * inv, tz * inv
-    qin[:] = qpos0
+    for k in range(nq):
+        qin[k] = qpos0[k]
     r = iprm[_IP_ROOT]
     qin[r] = 0.0
     qin[r + 1] = 0.0
