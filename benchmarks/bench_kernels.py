@@ -20,7 +20,8 @@ reference timed in the same run (so the figure holds on a busy machine):
 Accuracy on the same walk (streaming == batch bit for bit; vs. the pure-Python sensor) is
 printed too.
 
-Run: ``.venv/bin/python benchmarks/bench_kernels.py [--samples 100000] [--cold] [--write]``;
+Run: ``.venv/bin/python benchmarks/bench_kernels.py [--samples 100000] [--cold] [--hour]
+[--write]`` (``--hour``: stream 3.6 M samples, memory and slowdown);
 ``--write`` replaces the ``## Compiled kernels`` section of ``BENCHMARKS.md``.
 """
 
@@ -111,6 +112,8 @@ def main() -> None:
     ap.add_argument("--samples", type=int, default=100_000)
     ap.add_argument("--cold", action="store_true", help="also time compilation from empty")
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--hour", action="store_true",
+                    help="also stream one hour (3.6 M samples): memory and slowdown")
     a = ap.parse_args()
     info = machine()
     print(info, flush=True)
@@ -238,6 +241,30 @@ def main() -> None:
     except ImportError:
         qp_d = None
 
+    # ---------------------------------------------------------------- one hour streamed
+    hour = None
+    if a.hour:
+        def rss_mb() -> float:
+            with open("/proc/self/statm") as f:
+                return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+        cv.reset()
+        n_h = 3_600_000
+        blk = 100_000
+        rss0 = rss_mb()
+        med = []
+        pc = time.perf_counter_ns
+        t_all = time.perf_counter()
+        for b0 in range(0, n_h, blk):
+            ts = np.empty(blk)
+            for j in range(blk):
+                i = (b0 + j) % n_walk
+                t0 = pc()
+                cv.update_array(X1[i], y)
+                ts[j] = pc() - t0
+            med.append(float(np.median(ts)) / 1e3)
+        hour = (rss_mb() - rss0, med[0], med[-1], max(med), time.perf_counter() - t_all)
+
     # ---------------------------------------------------------------- report
     am, ap99, amax = stats(arr)
     dm, dp99, dmax = stats(dic)
@@ -245,7 +272,8 @@ def main() -> None:
     cm, cp99, cmax = stats(mon_c_t)
     pm, pp99, pmax = stats(mon_p_t)
     lines = [
-        "Command: `.venv/bin/python benchmarks/bench_kernels.py --write` (part of `make bench`).",
+        "Command: `.venv/bin/python benchmarks/bench_kernels.py --cold --hour --write` "
+        "(`make bench` runs it without `--cold --hour`).",
         "",
         f"Machine: {info}.",
         "",
@@ -282,6 +310,14 @@ def main() -> None:
         + (f"; qpsolvers + daqp {np.median(qp_d):.0f}" if qp_d is not None else "")
         + f" | {np.median(qp_s) / qm:.0f}x |"
     )
+    if hour is not None:
+        lines += [
+            "",
+            f"One hour streamed (3.6 M samples through `update_array`, the 20 s walk cycled): "
+            f"resident memory grew by {hour[0]:.1f} MB; per-sample median of the first / last "
+            f"100 k samples {hour[1]:.1f} / {hour[2]:.1f} µs (worst 100 k block "
+            f"{hour[3]:.1f} µs); {hour[4]:.0f} s in all.",
+        ]
     lines += [
         "",
         f"Accuracy on the 20 s walk: corner forces and totals within {acc_n:.1e} N of the "
