@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 from scipy.signal import butter, lfilter_zi
 
-from grfguard.errors import ConfigError
+from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
 from grfguard.kernels._jit import fma, njit
@@ -838,6 +838,13 @@ class VFSKernel:
         if y is None:
             y = np.empty(N_OUT)
         x = np.ascontiguousarray(x, dtype=float)
+        if x.shape != (N_IN,) or y.shape != (N_OUT,):
+            # the compiled code does not check bounds: refuse wrong shapes here
+            raise LogFormatError(
+                f"the compiled virtual force sensor takes an input row of shape ({N_IN},) in "
+                f"IN_COLUMNS order and an output row of shape ({N_OUT},); got {x.shape} and "
+                f"{y.shape} (see grfguard.kernels.vfs.IN_COLUMNS / OUT_COLUMNS)"
+            )
         args = (x, y, self.state, self.cf, self.ci, self.ws, self.iws)
         ep = self._entry
         if ep is not None and y.flags.c_contiguous and y.dtype == np.float64:
@@ -858,6 +865,11 @@ class VFSKernel:
         """Reset, then every row of ``X`` (T, 24) -> (T, 22)."""
         self.reset()
         X = np.ascontiguousarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != N_IN:
+            raise LogFormatError(
+                f"the compiled virtual force sensor takes a (T, {N_IN}) array in IN_COLUMNS "
+                f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
+            )
         Y = np.empty((X.shape[0], N_OUT))
         vfs_run_packed(X, Y, *self.packed_args())
         return Y
