@@ -278,8 +278,16 @@ def resolve_robot(value: str | Path | None, option: str = "--robot") -> Any:
 
     text = str(value)
     p = Path(text)
-    if p.suffix.lower() == ".toml" or p.exists() or "/" in text or "\\" in text:
-        read_toml(p, "robot TOML", option)
+    from grfguard.cli_robot import is_described_robot
+
+    looks_like_path = p.suffix.lower() == ".toml" or p.exists() or "/" in text or "\\" in text
+    if looks_like_path:
+        read_toml(p, "robot TOML", option)  # a directory, binary or broken file: one line
+    if is_described_robot(text):  # Talos, G1 or a TOML with a model file
+        from grfguard.model.description import load_description
+
+        return _build(lambda: load_description(text), f"{option} {text}")
+    if looks_like_path:
         return _build(lambda: robot_mod.RobotConfig.from_toml(p), f"{option} {p}")
     name = text.lower()
     if name == "suralp":
@@ -305,6 +313,11 @@ def robot_for_log(df: Any, robot: Any, where: str, option: str = "--robot") -> A
     names one. A log without robot metadata and no ``--robot`` is refused: grfguard never
     guesses the robot (a wrong mass flags every sensor)."""
     meta = df.attrs.get("robot")
+    if robot is not None and hasattr(robot, "sensing"):  # a described robot
+        df.attrs["robot"] = robot.to_dict()
+        df.attrs["robot_name"] = robot.name
+        df.attrs["sensing"] = robot.sensing
+        return robot
     if robot is not None:
         if isinstance(meta, Mapping) and meta.get("mass") not in (None, robot.mass):
             warnings.warn(
@@ -329,17 +342,11 @@ def check_log_plausible(df: Any, robot: Any, where: str) -> None:
     kN/kgf, acceleration in g, angles in degrees, a sensor on the wrong foot); warn about
     doubtful ones. ``robot`` None means the robot of ``df.attrs``."""
     from grfguard.io.plausibility import check_log
-    from grfguard.model.robot import RobotConfig
 
-    if robot is None:
-        meta = df.attrs.get("robot")
-        if isinstance(meta, str):
-            import json
-
-            meta = json.loads(meta)
-        if not isinstance(meta, Mapping):
+    if robot is None or hasattr(robot, "sensing"):
+        robot = _robot_of_log(df)
+        if robot is None:
             return
-        robot = RobotConfig.from_dict(dict(meta))
     issues = check_log(df, robot)
     for issue in issues:
         if issue.severity != "error":
@@ -350,3 +357,24 @@ def check_log_plausible(df: Any, robot: Any, where: str) -> None:
         raise LogFormatError(
             f"{where}: {errors[0].message}{more}; if the log is right, pass --no-unit-check"
         )
+
+
+def _robot_of_log(df: Any) -> Any:
+    """Something with the robot's ``mass`` [kg] from the log's metadata, or None."""
+    import json
+    from types import SimpleNamespace
+
+    from grfguard.model.robot import RobotConfig
+
+    mass = df.attrs.get("mass")
+    if "sensing" in df.attrs and isinstance(mass, (int, float)) and mass > 0:
+        return SimpleNamespace(mass=float(mass))  # a described robot (Talos, G1, ...)
+    meta = df.attrs.get("robot")
+    try:
+        if isinstance(meta, str):
+            meta = json.loads(meta)
+        if isinstance(meta, Mapping):
+            return RobotConfig.from_dict(dict(meta))
+    except (GrfguardError, TypeError, ValueError):
+        return None
+    return None

@@ -8,16 +8,18 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from grfguard._cliutil import ROBOT_HELP, friendly, say
+from grfguard._cliutil import ROBOT_HELP
+from grfguard._term import cli_friendly as _friendly
+from grfguard._term import cli_say as _say
+from grfguard._term import console, out  # noqa: F401  (re-exported for cli_* modules)
+from grfguard._term import progress as _progress
+from grfguard.cli_campaign import campaign_app
 
 app = typer.Typer(
     name="grfguard",
@@ -26,49 +28,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-robot_app = typer.Typer(help="Robot descriptions.", no_args_is_help=True)
-app.add_typer(robot_app, name="robot")
-
-console = Console(stderr=True)
-out = Console()
-
-
-def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn grfguard errors into one red line and exit code 2 (user text never read as
-    markup); print grfguard warnings as ``warning:`` lines."""
-    return friendly(console)(fn)
-
-
-def _say(message: str) -> None:
-    """One plain-text status line on stderr (paths may contain ``[...]``)."""
-    say(console, message)
-
-
-def _progress(description: str) -> Progress:
-    return Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>5.1f}%"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-        disable=not console.is_terminal,
-    )
-
-
-# ----------------------------------------------------------------------------- robot
-@robot_app.command("show")
-@_friendly
-def robot_show(
-    robot: Annotated[str | None, typer.Option(help=ROBOT_HELP + " Default SURALP.")] = None,
-) -> None:
-    """Print the robot description as TOML (the SURALP default: copy and edit it)."""
-    from grfguard._cliutil import resolve_robot
-    from grfguard.model.robot import SURALP
-
-    sys.stdout.write((resolve_robot(robot) or SURALP).to_toml())
-
+app.add_typer(campaign_app, name="campaign")
 
 # -------------------------------------------------------------------------- simulate
 @app.command()
@@ -82,11 +42,15 @@ def simulate(
         float | None, typer.Option(help="Double-support fraction of a step (0-1).")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the sensor noise.")] = 0,
-    robot: Annotated[str | None, typer.Option(help=ROBOT_HELP + " Default SURALP.")] = None,
+    robot: Annotated[
+        str | None, typer.Option(help=ROBOT_HELP + " Also talos, g1. Default SURALP.")
+    ] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
+    rate: Annotated[float, typer.Option(help="Log sample rate [Hz] (divides 1000).")] = 1000.0,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard._cliutil import check_seed, resolve_robot
+    from grfguard.cli_robot import is_described_robot, simulate_described
     from grfguard.io.logio import write_log
     from grfguard.io.safe import check_output
     from grfguard.model.robot import SURALP
@@ -94,6 +58,11 @@ def simulate(
     from grfguard.sim import simulate as _simulate
 
     check_seed(seed)
+    if is_described_robot(robot):
+        check_output(output, inputs=[robot], what="log")
+        simulate_described(robot, output, duration, step_length, step_period,
+                           double_support, seed, noise, rate)
+        return
     rob = resolve_robot(robot) or SURALP
     check_output(output, inputs=[robot], what="log")
     gait_kw: dict[str, Any] = {"duration": duration}
@@ -114,6 +83,10 @@ def simulate(
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
         )
+    if rate != 1000.0:
+        from grfguard.sim.wholebody import decimate
+
+        df = decimate(df, rate)
     write_log(df, output)
     _say(f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}")
 
@@ -221,7 +194,12 @@ def run(
 
     rob = _check_run_inputs(config, thresholds, robot)
     check_output(output, inputs=[log, config, thresholds, robot], what="output log")
-    df = load_log(log, time_order=time_order)
+    if rob is not None and hasattr(rob, "sensing"):  # a described robot: its columns
+        from grfguard.io.robot_schema import load_robot_log
+
+        df = load_robot_log(log, robot)
+    else:
+        df = load_log(log, time_order=time_order)
     robot_for_log(df, rob, str(log))
     if unit_check:
         check_log_plausible(df, rob, str(log))
@@ -262,41 +240,6 @@ def _run_segments(df: Any, **kw: Any) -> Any:
     return out
 
 
-def monitor_config(
-    config: Path | None = None,
-    thresholds: Path | None = None,
-    method: str | None = None,
-    vfs: str | None = None,
-) -> Any:
-    """The monitor configuration the command-line options describe.
-
-    ``method="paper"`` means the paper as published: its observer and, unless ``vfs``
-    or the config file says otherwise, its virtual sensor too.
-    """
-    from grfguard.detect.monitor import MonitorConfig
-    from grfguard.detect.thresholds import default_thresholds, paper_vfs_thresholds
-    from grfguard.errors import ConfigError
-    from grfguard.estimate.config import VFSConfig
-
-    cfg = MonitorConfig.from_toml(config) if config is not None else MonitorConfig()
-    if method is not None:
-        cfg = cfg.with_method(method)
-    if vfs is None and method == "paper" and cfg.vfs is None:
-        vfs = "paper"
-    if vfs == "paper":
-        cfg = cfg.replace(vfs=VFSConfig.paper())
-        if thresholds is None and cfg.thresholds == default_thresholds():
-            # the paper's eq. 33 thresholds come from fault-free runs of its own pipeline
-            cfg = cfg.with_thresholds(paper_vfs_thresholds())
-    elif vfs == "default":
-        cfg = cfg.replace(vfs=VFSConfig())
-    elif vfs is not None:
-        raise ConfigError(f"--vfs must be 'default' or 'paper', got {vfs!r}")
-    if thresholds is not None:
-        cfg = cfg.with_thresholds(thresholds)
-    return cfg
-
-
 def _run_monitor(
     df: Any,
     config: Path | None,
@@ -304,6 +247,7 @@ def _run_monitor(
     method: str | None,
     vfs: str | None = None,
 ) -> Any:
+    from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
@@ -323,6 +267,7 @@ def evaluate(
     """Accuracy of the virtual sensor and of detection against the truth columns."""
     from grfguard._cliutil import resolve_robot
     from grfguard.errors import LogFormatError
+    from grfguard.evaluate.frame import evaluate_frame
     from grfguard.io.logio import read_log
 
     rob = resolve_robot(robot)
@@ -342,47 +287,6 @@ def evaluate(
         out.print_json(json.dumps(to_jsonable(result)))
     else:
         _print_evaluation(result)
-
-
-def evaluate_frame(df: Any) -> dict[str, Any]:
-    """All metrics the truth in ``df`` allows (VFS accuracy, detection)."""
-    from grfguard.errors import LogFormatError
-
-    result: dict[str, Any] = {"source": df.attrs.get("source")}
-    if "vfs_r1" not in df.columns:
-        raise LogFormatError(
-            "the log has no vfs_* columns: evaluate the output of `grfguard run`, not its input"
-        )
-    if "true_force_r1" in df.columns:
-        from grfguard.evaluate.vfs_metrics import evaluate_vfs
-
-        result["vfs"] = evaluate_vfs(df)
-    if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        result["detection"] = detection_metrics(df)
-    return result
-
-
-def detection_metrics(df: Any) -> dict[str, Any]:
-    """Per-sensor detection metrics and their summary, as plain JSON-able dicts."""
-    import math
-
-    from grfguard.evaluate.detection import evaluate_detection, summarize_detection
-
-    table = evaluate_detection(df)
-    duration = float(df["time"].iloc[-1] - df["time"].iloc[0])
-
-    def clean(v: Any) -> Any:
-        if hasattr(v, "item"):
-            v = v.item()
-        if isinstance(v, float) and math.isnan(v):
-            return None
-        return v
-
-    sensors = {
-        str(s): {k: clean(v) for k, v in row.items()} for s, row in table.iterrows()
-    }
-    summary = {k: clean(v) for k, v in summarize_detection(table, duration).items()}
-    return {"sensors": sensors, "summary": summary}
 
 
 def _fmt(v: Any) -> str:
@@ -494,9 +398,9 @@ def report(
 
 
 def _detection_metrics_or_none(df: Any) -> Any:
-    if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        return detection_metrics(df)["sensors"]
-    return None
+    from grfguard.evaluate.frame import detection_metrics, has_detection_truth
+
+    return detection_metrics(df)["sensors"] if has_detection_truth(df) else None
 
 
 # ------------------------------------------------------------------------------ demo
@@ -515,6 +419,25 @@ def demo(
     check_seed(seed)
     check_output_dir(out_dir)
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
+
+
+def __getattr__(name: str) -> Any:
+    """Old import paths: ``grfguard.cli.{monitor_config, evaluate_frame, detection_metrics}``."""
+    if name == "monitor_config":
+        from grfguard.config import monitor_config
+
+        return monitor_config
+    if name in ("evaluate_frame", "detection_metrics"):
+        import grfguard.evaluate.frame as frame
+
+        return getattr(frame, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
+
+app.add_typer(robot_app, name="robot")
+app.command("decimate")(decimate_cmd)
 
 
 def main() -> None:

@@ -217,6 +217,8 @@ def _check_metadata(meta: Any, path: Path) -> None:
     robot = meta.get("robot")
     if robot is None or isinstance(robot, str):
         return
+    if isinstance(robot, dict) and ("model" in robot or "sensing" in meta):
+        return  # a described robot (Talos, G1, ...): checked by io.robot_schema
     if not isinstance(robot, dict):
         raise LogFormatError(
             f"{path}: metadata key 'robot' must be a JSON object with the robot "
@@ -481,4 +483,10 @@ def load_log(path: str | Path, time_order: str = "strict") -> pd.DataFrame:
     Checks that the input columns of the log contract are present (``time``, IMU,
     joint encoders, force sensors); timestamps as in :func:`read_log`.
     """
-    return read_log(path, required=REQUIRED_INPUT_COLUMNS, time_order=time_order)
+    from grfguard.io.robot_schema import is_described_log, load_robot_log
+
+    df = read_log(path, time_order=time_order)
+    if is_described_log(df):  # Talos, G1, ...: columns from the robot description
+        return load_robot_log(path)
+    validate_log(df, required=REQUIRED_INPUT_COLUMNS, where=str(path))
+    return df

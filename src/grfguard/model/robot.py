@@ -100,6 +100,10 @@ class RobotConfig:
     foot_mass_fraction: float = 0.03
     #: Height of the trunk's CoM above the hip joints in [m]. ASSUMED.
     trunk_com_height: float = 0.20
+    #: Forward offset of the trunk's CoM from the hip midpoint in [m] (0: centred).
+    trunk_com_x: float = 0.0
+    #: Leftward offset of the trunk's CoM from the hip midpoint in [m] (0: centred).
+    trunk_com_y: float = 0.0
     #: Trunk box height in [m] (inertia only). ASSUMED.
     trunk_height: float = 0.45
     #: Trunk box depth (x) in [m] (inertia only). ASSUMED.
@@ -143,6 +147,8 @@ class RobotConfig:
                 "trunk + 2 * (thigh + shank + foot) must equal 1"
             )
         _check_range("trunk_com_height", self.trunk_com_height, 0.0, 2.0, "m")
+        _check_range("trunk_com_x", self.trunk_com_x, -0.5, 0.5, "m")
+        _check_range("trunk_com_y", self.trunk_com_y, -0.5, 0.5, "m")
         _check_range("trunk_height", self.trunk_height, 0.05, 3.0, "m")
         _check_range("trunk_depth", self.trunk_depth, 0.02, 2.0, "m")
         _check_range("contact_radius", self.contact_radius, 0.0005, 0.05, "m")
