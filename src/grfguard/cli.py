@@ -393,8 +393,32 @@ def report(
     if png is not None:
         from grfguard.report.figures import write_png_figures
 
-        paths = write_png_figures(df, png, metrics=metrics)
+        paths = _write_pngs_atomically(df, png, metrics, write_png_figures)
         _say(f"wrote {len(paths)} figure(s) to {png}")
+
+
+def _write_pngs_atomically(df: Any, png: Path, metrics: Any, writer: Any) -> list[Path]:
+    """Render every figure in a temporary directory next to ``png``, then move each one
+    in with an atomic rename: a failure leaves no partial PNG and the old figures intact."""
+    import os
+    import tempfile
+
+    from grfguard.errors import OutputError
+
+    png.mkdir(parents=True, exist_ok=True)
+    try:
+        with tempfile.TemporaryDirectory(dir=png.parent, prefix=f".{png.name}.") as tmp:
+            rendered = writer(df, Path(tmp), metrics=metrics)
+            done = []
+            for p in rendered:
+                os.replace(p, png / Path(p).name)
+                done.append(png / Path(p).name)
+            return done
+    except OSError as exc:
+        raise OutputError(
+            f"--png {png}: could not write the figures ({exc.strerror or exc}); the "
+            "previous figures, if any, are unchanged"
+        ) from None
 
 
 def _detection_metrics_or_none(df: Any) -> Any:
