@@ -366,7 +366,7 @@ def report(
     from grfguard._cliutil import resolve_robot
     from grfguard.errors import ConfigError, LogFormatError
     from grfguard.io.logio import read_log
-    from grfguard.io.safe import atomic_path, check_output, check_output_dir
+    from grfguard.io.safe import check_output, check_output_dir
 
     if output is None and png is None:
         raise ConfigError("nothing to write: give -o REPORT.html and/or --png DIR")
@@ -387,8 +387,7 @@ def report(
     if output is not None:
         from grfguard.report.html import write_html_report
 
-        with atomic_path(output, what="HTML report") as tmp:
-            write_html_report(df, tmp, metrics=metrics)
+        write_html_report(df, output, metrics=metrics)  # atomic (io.safe)
         _say(f"wrote {output}")
     if png is not None:
         from grfguard.report.figures import write_png_figures

@@ -89,9 +89,11 @@ def run_demo(
         results[method] = evaluate_frame(res)
 
     console.print("[bold]4/5[/] writing figures and metrics")
-    (out_dir / "metrics.json").write_text(json.dumps(to_jsonable(results), indent=2))
+    from grfguard.io.safe import atomic_write_text
+
+    atomic_write_text(out_dir / "metrics.json", json.dumps(to_jsonable(results), indent=2))
     table_md = _metrics_markdown(results)
-    (out_dir / "metrics.md").write_text(table_md)
+    atomic_write_text(out_dir / "metrics.md", table_md)
     pngs = write_png_figures(
         runs["default"], out_dir / "figures",
         metrics=results["default"].get("detection", {}).get("sensors"),
