@@ -492,3 +492,12 @@ def test_png_figures_move_in_atomically(tmp_path) -> None:
     assert _write_pngs_atomically(None, figs, None, good) == [figs / "a.png", figs / "b.png"]
     assert (figs / "a.png").read_bytes() == b"new a.png"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"]
+
+
+@pytest.mark.parametrize(("duration", "needle"), [("1e9", "GB of memory"),
+                                                   ("nan", "positive number")])
+def test_simulate_duration_is_checked_against_memory(tmp_path, duration, needle) -> None:
+    out = tmp_path / "w.parquet"
+    line = _one_error_line(runner.invoke(app, ["simulate", "--duration", duration, "-o",
+                                               str(out)]))
+    assert needle in line and not out.exists()
