@@ -501,3 +501,19 @@ def test_simulate_duration_is_checked_against_memory(tmp_path, duration, needle)
     line = _one_error_line(runner.invoke(app, ["simulate", "--duration", duration, "-o",
                                                str(out)]))
     assert needle in line and not out.exists()
+
+
+def test_calibrate_on_a_few_samples_is_refused(walk, tmp_path) -> None:
+    short = write_log(read_log(walk).iloc[:5], tmp_path / "five.parquet")
+    out = tmp_path / "th.toml"
+    line = _one_error_line(runner.invoke(app, ["calibrate", str(short), "-o", str(out)]))
+    assert "at least 5 s" in line and not out.exists()
+
+
+def test_infinite_threshold_is_never_silent(walk, tmp_path) -> None:
+    th = tmp_path / "th.toml"
+    th.write_text("[thresholds]\nswing_h = inf\n")
+    res = runner.invoke(app, ["run", str(walk), "-o", str(tmp_path / "o.parquet"),
+                              "--thresholds", str(th)])
+    assert res.exit_code == 0, res.output
+    assert "warning:" in res.output and "['swing_h'] = inf switch those tests off" in res.output

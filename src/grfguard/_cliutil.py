@@ -201,6 +201,7 @@ def check_monitor_toml(path: str | Path, option: str = "--config") -> Any:
         )
     for key, known in tables.items():
         _check_table(doc, key, lead, known)
+    _warn_disabled(doc.get("thresholds"), lead)
     return _build(lambda: MonitorConfig.from_toml(p), lead)
 
 
@@ -220,7 +221,22 @@ def check_thresholds_toml(path: str | Path, option: str = "--thresholds") -> Any
                               "table is allowed")
     else:
         _check_keys(doc, lead, "the file", known)
+    _warn_disabled(doc.get("thresholds", doc), lead)
     return _build(lambda: Thresholds.from_toml(p), lead)
+
+
+def _warn_disabled(table: Any, lead: str) -> None:
+    """An infinite threshold switches its test off: say so (it is never silent)."""
+    if not isinstance(table, Mapping):
+        return
+    off = sorted(k for k, v in table.items() if isinstance(v, float) and v == float("inf"))
+    if off:
+        warnings.warn(
+            f"{lead}: threshold(s) {off} = inf switch those tests off; use finite values "
+            "(`grfguard calibrate`) to keep them on",
+            GrfguardWarning,
+            stacklevel=3,
+        )
 
 
 def check_faults_toml(path: str | Path, option: str = "--faults") -> list[Any]:

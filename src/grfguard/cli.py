@@ -379,9 +379,22 @@ def calibrate(
     frames = [load_log(p) for p in logs]
     for p, f in zip(logs, frames, strict=True):
         robot_for_log(f, rob, str(p))
+    total_s = sum(float(f["time"].iloc[-1] - f["time"].iloc[0]) for f in frames)
+    if total_s < _MIN_CALIBRATION_S:
+        from grfguard.errors import LogFormatError
+
+        raise LogFormatError(
+            f"calibration needs at least {_MIN_CALIBRATION_S:g} s of fault-free walking, the "
+            f"{len(frames)} log(s) hold {total_s:.3g} s; give longer logs (minutes give "
+            "thresholds that hold)"
+        )
     th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     atomic_write_text(output, th.to_toml(), what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")
+
+
+#: Least fault-free walking `grfguard calibrate` accepts [s] (a few steps).
+_MIN_CALIBRATION_S = 5.0
 
 
 # ---------------------------------------------------------------------------- report
