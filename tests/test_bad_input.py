@@ -475,21 +475,21 @@ def test_png_figures_move_in_atomically(tmp_path) -> None:
     figs.mkdir()
     (figs / "a.png").write_bytes(b"old a")
 
-    def good(df, out, metrics=None):
+    def good(df, out):
         paths = [out / "a.png", out / "b.png"]
         for p in paths:
             p.write_bytes(b"new " + p.name.encode())
         return paths
 
-    def dies_half_way(df, out, metrics=None):
+    def dies_half_way(df, out):
         (out / "a.png").write_bytes(b"partial")
         raise OSError(errno.ENOSPC, "No space left on device")
 
     with pytest.raises(OutputError, match="previous figures"):
-        _write_pngs_atomically(None, figs, None, dies_half_way)
+        _write_pngs_atomically(None, figs, dies_half_way)
     assert (figs / "a.png").read_bytes() == b"old a"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"]  # no temporary directory
-    assert _write_pngs_atomically(None, figs, None, good) == [figs / "a.png", figs / "b.png"]
+    assert _write_pngs_atomically(None, figs, good) == [figs / "a.png", figs / "b.png"]
     assert (figs / "a.png").read_bytes() == b"new a.png"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"]
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import psutil
 import pytest
 
 from grfguard.campaign import ResultStore, parse_spec
@@ -157,8 +158,14 @@ def local_results(tmp_path_factory):
     client = Client(cluster)
     info: dict = {"killed": None, "results_at_kill": None}
     try:
-        addrs = [cluster.scheduler_address, *client.scheduler_info()["workers"]]
+        workers = client.scheduler_info()["workers"]
+        addrs = [cluster.scheduler_address, *workers,
+                 *(w["nanny"] for w in workers.values() if w.get("nanny"))]
         pids_before = client.run(os.getpid)
+        pids = [os.getpid(), *pids_before.values(), *client.run(os.getpid, nanny=True).values()]
+        listening = {(c.laddr.ip, c.laddr.port) for pid in pids
+                     for c in psutil.Process(pid).net_connections(kind="inet")
+                     if c.status == psutil.CONN_LISTEN}
         lock = threading.Lock()
 
         def kill_one(row):
@@ -166,6 +173,7 @@ def local_results(tmp_path_factory):
                 n = len(_files(out))
                 if info["killed"] is None and n >= 4:
                     addr, pid = sorted(pids_before.items())[0]
+                    info["in_flight"] = list(client.processing([addr]).get(addr, []))
                     os.kill(pid, signal.SIGKILL)
                     info["killed"], info["results_at_kill"] = pid, n
 
@@ -179,18 +187,25 @@ def local_results(tmp_path_factory):
         client.close()
         cluster.close()
     return {"out": out, "spec": spec, "summary": summary, "addrs": addrs, "info": info,
+            "listening": listening,
             "pids_before": pids_before, "pids_after": pids_after}
 
 
 def test_local_cluster_listens_on_localhost_only(local_results):
     addrs = local_results["addrs"]
-    assert len(addrs) == 3
+    assert len(addrs) == 5  # scheduler, 2 workers, 2 nannies
     assert all(a.startswith("tcp://127.0.0.1:") for a in addrs), addrs
+    # every listening socket of the scheduler, workers and nannies (HTTP servers included)
+    listening = local_results["listening"]
+    assert len(listening) >= 5
+    assert {ip for ip, _ in listening} == {"127.0.0.1"}, listening
 
 
 def test_killed_worker_every_cell_exactly_once(local_results):
     out, info, s = local_results["out"], local_results["info"], local_results["summary"]
     assert info["killed"] is not None and info["results_at_kill"] < N_TINY
+    # the killed worker had cells in flight (running or queued on it)
+    assert any(k.startswith("cell-") for k in info["in_flight"]), info["in_flight"]
     assert info["killed"] not in local_results["pids_after"].values()
     assert s.n_cells == N_TINY and s.n_computed == N_TINY and s.n_failed == 0
     files = _files(out)

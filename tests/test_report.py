@@ -125,7 +125,7 @@ def test_summary_fallback_on_paper_scenario(run_df: pd.DataFrame) -> None:
                                 ("r3", "drift", 0.9), ("r4", "offset", 0.3)):
         assert s.loc[sensor, "state"] == "detected"
         assert s.loc[sensor, "injected_kind"] == kind
-        assert s.loc[sensor, "detected_kind"] == kind
+        assert s.loc[sensor, "kind_estimated"] == kind
         assert s.loc[sensor, "delay_s"] == pytest.approx(delay, abs=1.5e-3)
         assert s.loc[sensor, "false_alarms"] == 0
     assert s.loc["r2", "true_size_n"] == pytest.approx(100.0)

@@ -47,6 +47,9 @@ def simulate(
     ] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
     rate: Annotated[float, typer.Option(help="Log sample rate [Hz] (divides 1000).")] = 1000.0,
+    reality: Annotated[
+        str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
+    ] = None,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard._cliutil import check_seed, resolve_robot
@@ -56,6 +59,7 @@ def simulate(
     from grfguard.model.robot import SURALP
     from grfguard.sim import GaitConfig, NoiseConfig
     from grfguard.sim import simulate as _simulate
+    from grfguard.sim.reality import load_reality
 
     check_seed(seed)
     _check_memory_for(duration)
@@ -83,6 +87,7 @@ def simulate(
             noise=noise_cfg,
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
+            reality=load_reality(reality),
         )
     if rate != 1000.0:
         from grfguard.sim.wholebody import decimate
@@ -186,7 +191,7 @@ def inject(
 @app.command()
 @_friendly
 def run(
-    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV).")],
+    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV) or ROS bag.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Output log to write.")],
     config: Annotated[Path | None, typer.Option(help="Monitor/VFS config TOML.")] = None,
     thresholds: Annotated[Path | None, typer.Option(help="Thresholds TOML (calibrate).")] = None,
@@ -221,20 +226,24 @@ def run(
             "on the wrong foot.",
         ),
     ] = True,
+    topics_map: Annotated[
+        Path | None, typer.Option("--map", help="Topics map TOML for a ROS bag input.")
+    ] = None,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
-    from grfguard.io.logio import load_log, write_log
+    from grfguard.io.anyread import read_any
+    from grfguard.io.logio import write_log
     from grfguard.io.safe import check_output
 
     rob = _check_run_inputs(config, thresholds, robot)
-    check_output(output, inputs=[log, config, thresholds, robot], what="output log")
+    check_output(output, inputs=[log, config, thresholds, robot, topics_map], what="output log")
     if rob is not None and hasattr(rob, "sensing"):  # a described robot: its columns
         from grfguard.io.robot_schema import load_robot_log
 
         df = load_robot_log(log, robot)
     else:
-        df = load_log(log, time_order=time_order)
+        df = read_any(log, topics_map, time_order=time_order)
     robot_for_log(df, rob, str(log))
     if unit_check:
         check_log_plausible(df, rob, str(log))
@@ -286,6 +295,10 @@ def _run_monitor(
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
+    if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
+        from grfguard.cli_calib import corrected_log
+
+        df = corrected_log(df, thresholds)
     return Monitor.for_log(df, config=cfg).run(df)
 
 
@@ -367,10 +380,14 @@ def calibrate(
         str | None,
         typer.Option(help=ROBOT_HELP + " Required when a log has no grfguard metadata."),
     ] = None,
+    model: Annotated[
+        bool, typer.Option("--model", help="Also fit model corrections (grfguard.calib).")
+    ] = False,
+    mass: Annotated[float | None, typer.Option(help="Measured robot mass [kg].")] = None,
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
     from grfguard._cliutil import robot_for_log
-    from grfguard.detect.monitor import calibrate_monitor
+    from grfguard.detect.calibrate import calibrate_thresholds
     from grfguard.io.logio import load_log
     from grfguard.io.safe import atomic_write_text, check_output
 
@@ -388,8 +405,13 @@ def calibrate(
             f"{len(frames)} log(s) hold {total_s:.3g} s; give longer logs (minutes give "
             "thresholds that hold)"
         )
-    th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
-    atomic_write_text(output, th.to_toml(), what="thresholds TOML")
+    corr_toml = ""
+    if model:  # model corrections first, thresholds on the corrected data (issue 10)
+        from grfguard.cli_calib import fit_model_corrections
+
+        frames, corr_toml = fit_model_corrections(frames, mass, console)
+    th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
+    atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")
 
 
@@ -423,7 +445,7 @@ def report(
         check_output(output, inputs=[log], what="HTML report")
     if png is not None:
         check_output_dir(png, inputs=[log], what="figure directory", option="--png")
-    df = read_log(log)
+    df = read_log(log)  # the report computes the metrics of `grfguard evaluate` itself
     if rob is not None:
         df.attrs["robot"] = rob.to_dict()
     if not any(str(c).startswith("flag_") for c in df.columns):
@@ -431,20 +453,19 @@ def report(
             f"{log} has no flag_* columns: it was never run; report the output of "
             f"`grfguard run {log} -o OUT.parquet`"
         )
-    metrics = _detection_metrics_or_none(df)
     if output is not None:
         from grfguard.report.html import write_html_report
 
-        write_html_report(df, output, metrics=metrics)  # atomic (io.safe)
+        write_html_report(df, output)  # atomic (io.safe)
         _say(f"wrote {output}")
     if png is not None:
         from grfguard.report.figures import write_png_figures
 
-        paths = _write_pngs_atomically(df, png, metrics, write_png_figures)
+        paths = _write_pngs_atomically(df, png, write_png_figures)
         _say(f"wrote {len(paths)} figure(s) to {png}")
 
 
-def _write_pngs_atomically(df: Any, png: Path, metrics: Any, writer: Any) -> list[Path]:
+def _write_pngs_atomically(df: Any, png: Path, writer: Any) -> list[Path]:
     """Render every figure in a temporary directory next to ``png``, then move each one
     in with an atomic rename: a failure leaves no partial PNG and the old figures intact."""
     import os
@@ -455,7 +476,7 @@ def _write_pngs_atomically(df: Any, png: Path, metrics: Any, writer: Any) -> lis
     png.mkdir(parents=True, exist_ok=True)
     try:
         with tempfile.TemporaryDirectory(dir=png.parent, prefix=f".{png.name}.") as tmp:
-            rendered = writer(df, Path(tmp), metrics=metrics)
+            rendered = writer(df, Path(tmp))
             done = []
             for p in rendered:
                 os.replace(p, png / Path(p).name)
@@ -466,12 +487,6 @@ def _write_pngs_atomically(df: Any, png: Path, metrics: Any, writer: Any) -> lis
             f"--png {png}: could not write the figures ({exc.strerror or exc}); the "
             "previous figures, if any, are unchanged"
         ) from None
-
-
-def _detection_metrics_or_none(df: Any) -> Any:
-    from grfguard.evaluate.frame import detection_metrics, has_detection_truth
-
-    return detection_metrics(df)["sensors"] if has_detection_truth(df) else None
 
 
 # ------------------------------------------------------------------------------ demo
@@ -509,6 +524,10 @@ from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
 
 app.add_typer(robot_app, name="robot")
 app.command("decimate")(decimate_cmd)
+
+from grfguard.cli_ros import register as _register_ros  # noqa: E402
+
+_register_ros(app, _friendly)
 
 
 def main() -> None:

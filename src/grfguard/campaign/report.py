@@ -32,6 +32,11 @@ __all__ = [
 
 #: Method colours (Okabe-Ito, as the rest of the reports).
 METHOD_COLORS = {"default": "#0072B2", "paper": "#D55E00"}
+#: Line style per method (the paper's curve stays visible on top of the default's).
+_STYLE: dict[str, dict[str, Any]] = {
+    "default": {"marker": "o", "ls": "-"},
+    "paper": {"marker": "s", "ls": "--", "mfc": "none", "ms": 8},
+}
 _UNITS = {"offset": "N", "drift": "N/s", "gain": "×", "noise": "σ N", "spikes": "N",
           "saturation": "N", "frozen": "N"}
 
@@ -69,8 +74,8 @@ def plot_detection_rates(tab: pd.DataFrame, level: float = 0.95):
             g = g.sort_values("size")
             x = np.arange(len(g)) if not np.isfinite(g["size"]).all() else g["size"]
             err = np.vstack([g["rate"] - g["rate_lo"], g["rate_hi"] - g["rate"]])
-            ax.errorbar(x, g["rate"], yerr=err, marker="o", capsize=3, label=method,
-                        color=METHOD_COLORS.get(method))
+            ax.errorbar(x, g["rate"], yerr=err, capsize=3, label=method,
+                        color=METHOD_COLORS.get(method), **_STYLE.get(method, {}))
         ax.axhline(level, color="0.4", ls="--", lw=0.8)
         ax.set_ylim(-0.05, 1.05)
         ax.set_title(kind)
@@ -97,12 +102,13 @@ def plot_delays(df: pd.DataFrame, threshold_scale: float = 1.0):
             keep = [i for i, d in enumerate(data) if d.size]
             if keep:
                 bp = ax.boxplot([data[i] for i in keep], positions=pos[keep], widths=0.3,
-                                patch_artist=True, showfliers=True)
+                                patch_artist=True, showfliers=True,
+                                medianprops={"color": "black"})
                 for b in bp["boxes"]:
                     b.set_facecolor(METHOD_COLORS.get(method, "0.7"))
                     b.set_alpha(0.6)
             ax.plot([], [], "s", color=METHOD_COLORS.get(method), label=method)
-        ax.set_xticks(np.arange(len(sizes)), [f"{s:g}" for s in sizes])
+        ax.set_xticks(np.arange(len(sizes)), ["–" if math.isnan(s) else f"{s:g}" for s in sizes])
         ax.set_title(kind)
         ax.set_xlabel(f"size [{_UNITS.get(kind, '-')}]")
         ax.set_ylabel("delay of detected runs [s]")

@@ -80,7 +80,7 @@ def cells_table(cells: list[Cell]) -> pd.DataFrame:
 
 def local_cluster(n_workers: int | None = None) -> Any:
     """A ``LocalCluster`` of single-threaded worker processes that listens on 127.0.0.1 only
-    (scheduler, workers and nannies; no dashboard)."""
+    (scheduler, its HTTP server, workers and nannies, on free ports)."""
     from distributed import LocalCluster
 
     n = n_workers if n_workers is not None else max(1, os.cpu_count() or 1)
@@ -91,7 +91,7 @@ def local_cluster(n_workers: int | None = None) -> Any:
         threads_per_worker=1,
         processes=True,
         host="127.0.0.1",
-        dashboard_address=None,
+        dashboard_address="127.0.0.1:0",  # the scheduler's HTTP server: localhost too
         silence_logs=40,
     )
 

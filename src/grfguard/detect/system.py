@@ -15,7 +15,8 @@ a sudden sensor fault is caught by the per-sensor tests long before the fit coul
 absorb it, and it freezes while any sensor is flagged. The fitted pattern is returned as
 ``correction_n`` (add it to the virtual forces before the per-sensor tests) together with
 ``model_mismatch`` (True when ``|alpha|`` exceeds ``mass_ratio_limit`` or the CoP shift
-exceeds ``cop_shift_limit_m``) and a short ``reason``.
+exceeds ``cop_shift_limit_m``) and a short ``reason``. The correction is zero unless the
+status is raised (on an exact model the per-sensor tests see the plain virtual forces).
 
 Wiring (see :func:`system_aware_run`): per sample, ``v_i + correction_n[i]`` replaces
 ``v_i`` in the per-sensor detector, and ``model_mismatch`` / ``reason`` go to the output
@@ -163,7 +164,7 @@ class CommonModeMonitor:
                 self._theta = np.linalg.solve(self._M + reg * np.eye(3), self._b)
             except np.linalg.LinAlgError:
                 pass
-        th = self._theta
+        th = self._theta if self._loaded_s >= c.warmup_s else np.zeros(3)
         ratio = float(np.clip(th[0], -c.max_ratio, c.max_ratio))
         shift = np.clip(th[1:], -c.max_cop_shift_m, c.max_cop_shift_m)
         corr = np.where(ok, ratio * v, 0.0) + phi[:, 1] * shift[0] + phi[:, 2] * shift[1]
@@ -177,6 +178,8 @@ class CommonModeMonitor:
                     f"attitude/CoM inconsistent (CoP shifted {100 * shift[0]:+.1f} cm x, "
                     f"{100 * shift[1]:+.1f} cm y)"
                 )
+        if not reasons:  # no evidence against the model: leave the virtual forces alone
+            corr = np.zeros(8)
         return CommonModeResult(corr, bool(reasons), "; ".join(reasons), ratio, shift)
 
 
@@ -231,6 +234,7 @@ class SystemAwareMonitor:
         self.common = CommonModeMonitor(robot, self.config.dt_s, common)
         self.standing = StandingDetector(self.config.dt_s, standing)
         self._last_flags = [False] * 8
+        self._zmp_prev = (math.nan, math.nan)
 
     @classmethod
     def for_log(cls, log, config=None, **kwargs) -> SystemAwareMonitor:
@@ -249,6 +253,7 @@ class SystemAwareMonitor:
         self.common.reset()
         self.standing.reset()
         self._last_flags = [False] * 8
+        self._zmp_prev = (math.nan, math.nan)
 
     def _process(self, row: dict, vout: dict) -> dict:
         from grfguard.model.robot import SENSOR_NAMES, SIDES
@@ -270,7 +275,14 @@ class SystemAwareMonitor:
         ]
         cm = self.common.update(x, v, valid, frozen=any(self._last_flags))
         vc = [vi + float(ci) for vi, ci in zip(v, cm.correction_n, strict=True)]
-        ds = all(math.isfinite(c) and c > 0.5 for c in cref)
+        # standing: both feet planned in contact and the ZMP reference at rest
+        zr = (f(row, "zmp_ref_x"), f(row, "zmp_ref_y"))
+        still = not any(
+            math.isfinite(a) and math.isfinite(b) and abs(a - b) > 1e-6
+            for a, b in zip(zr, self._zmp_prev, strict=True)
+        )
+        self._zmp_prev = zr
+        ds = still and all(math.isfinite(c) and c > 0.5 for c in cref)
         st_flags, st_kinds = self.standing.update(x, vc, ds)
         inner_row = dict(row)
         inner_row.update(src)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Layout", "Group", "layout_of", "split_groups", "field", "CdrError"]
+__all__ = ["Layout", "Group", "Packed", "layout_of", "split_groups", "field", "fill", "CdrError"]
 
 _SIZES = {
     "bool": 1, "byte": 1, "char": 1, "int8": 1, "uint8": 1,
@@ -171,6 +171,43 @@ def layout_of(raw: bytes, typename: str, typestore: Any, ros1: bool = False) -> 
 
 
 @dataclass
+class Packed:
+    """Serialised messages packed in one buffer: message ``i`` is
+    ``buf[offs[i] : offs[i] + lens[i]]``."""
+
+    buf: np.ndarray
+    offs: np.ndarray
+    lens: np.ndarray
+    _bytes: bytes | None = None
+
+    @classmethod
+    def from_list(cls, raws: Sequence[bytes]) -> Packed:
+        lens = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+        offs = np.zeros(len(raws), dtype=np.int64)
+        if len(raws) > 1:
+            np.cumsum(lens[:-1], out=offs[1:])
+        joined = b"".join(raws)
+        return cls(np.frombuffer(joined, dtype=np.uint8), offs, lens, joined)
+
+    def __len__(self) -> int:
+        return int(self.offs.size)
+
+    def get(self, i: int) -> bytes:
+        o = int(self.offs[i])
+        return self.buf[o : o + int(self.lens[i])].tobytes()
+
+    def rows(self, idx: np.ndarray, length: int) -> np.ndarray:
+        """``(len(idx), length)`` uint8 array of messages ``idx`` (all ``length`` long)."""
+        o = self.offs[idx]
+        if idx.size > 1 and (np.diff(o) == length).all():  # contiguous: one slice
+            return self.buf[o[0] : o[0] + idx.size * length].reshape(idx.size, length)
+        raw = self.buf.tobytes() if self._bytes is None else self._bytes
+        self._bytes = raw  # bytes slices are far cheaper than memoryview slices
+        joined = b"".join([raw[a : a + length] for a in o.tolist()])
+        return np.frombuffer(joined, dtype=np.uint8).reshape(idx.size, length)
+
+
+@dataclass
 class Group:
     """Messages of one topic that share a layout.
 
@@ -186,20 +223,17 @@ class Group:
 
 
 def split_groups(
-    raws: Sequence[bytes], typename: str, typestore: Any, ros1: bool = False
+    raws: Packed | Sequence[bytes], typename: str, typestore: Any, ros1: bool = False
 ) -> list[Group]:
     """Group serialised messages by layout (one group when the layout never changes)."""
-    if not raws:
+    packed = raws if isinstance(raws, Packed) else Packed.from_list(raws)
+    if not len(packed):
         return []
-    lengths = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+    lengths = packed.lens
     groups: list[Group] = []
     for length in np.unique(lengths):
         idx = np.flatnonzero(lengths == length)
-        if idx.size == len(raws):
-            buf = b"".join(raws)
-        else:
-            buf = b"".join([raws[i] for i in idx.tolist()])
-        arr = np.frombuffer(buf, dtype=np.uint8).reshape(idx.size, int(length))
+        arr = packed.rows(idx, int(length))
         todo = np.arange(idx.size)
         while todo.size:
             lay = layout_of(arr[todo[0]].tobytes(), typename, typestore, ros1)
@@ -209,7 +243,7 @@ def split_groups(
                 todo.size, dtype=bool
             )
             keep = todo[same]
-            data = sub[same] if not same.all() else sub
+            data = sub if same.all() else sub[same]
             groups.append(Group(idx[keep], lay, np.ascontiguousarray(data)))
             todo = todo[~same]
     return groups

@@ -10,7 +10,13 @@ topic                   type                                rate      stamps
 ``/joint_states``       ``sensor_msgs/msg/JointState``      500 Hz    header + receive
 ``/foot/<s>/load_cells`` ``std_msgs/msg/Float64MultiArray``  1 kHz     receive only
 ``/foot/<s>/wrench``    ``geometry_msgs/msg/WrenchStamped`` 1 kHz     header + receive
+``/gait/zmp_ref``       ``geometry_msgs/msg/PointStamped``  1 kHz     header + receive
+``/gait/contact_ref``   ``std_msgs/msg/Float64MultiArray``  1 kHz     receive only
 ======================  ==================================  ========  ==================
+
+The two ``/gait`` topics are the walking planner's plan (planned ZMP; planned stance
+``[right, left]``, 1 = stance), written when the log has them; the monitor gates its
+tests with the planned stance, so a bag should carry it when the robot has one.
 
 ``<s>`` is ``r`` or ``l``; a load-cell array holds the foot's four sensors in the order
 1..4. The wrench is the foot's total force and its moment about the sole centre (from the
@@ -33,10 +39,22 @@ import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.io import _cdr
-from grfguard.io.schema import IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS, TIME, force_col
+from grfguard.io.schema import (
+    CONTACT_REF,
+    IMU_ACC,
+    IMU_GYRO,
+    IMU_QUAT,
+    JOINT_COLUMNS,
+    TIME,
+    ZMP_REF,
+    force_col,
+)
 from grfguard.model.robot import JOINT_NAMES, SIDES
 
-__all__ = ["write_bag", "BAG_TOPICS", "START_NS"]
+__all__ = ["write_bag", "BAG_TOPICS", "START_NS", "META_TOPIC"]
+
+#: Topic of one ``std_msgs/msg/String``: the log's metadata (robot, gait, faults) as JSON.
+META_TOPIC = "/grfguard/metadata"
 
 #: Topic -> message type of the bags :func:`write_bag` writes.
 BAG_TOPICS: dict[str, str] = {
@@ -44,6 +62,8 @@ BAG_TOPICS: dict[str, str] = {
     "/joint_states": "sensor_msgs/msg/JointState",
     **{f"/foot/{s}/load_cells": "std_msgs/msg/Float64MultiArray" for s in SIDES},
     **{f"/foot/{s}/wrench": "geometry_msgs/msg/WrenchStamped" for s in SIDES},
+    "/gait/zmp_ref": "geometry_msgs/msg/PointStamped",
+    "/gait/contact_ref": "std_msgs/msg/Float64MultiArray",
 }
 #: Bag time of log time 0 [ns since the epoch] (2023-11-14 22:13:20 UTC).
 START_NS = 1_700_000_000_000_000_000
@@ -89,6 +109,8 @@ def _build(ts: Any, typename: str, **kw: Any) -> Any:
             layout=T["std_msgs/msg/MultiArrayLayout"](dim=[dim], data_offset=0),
             data=np.zeros(n),
         )
+    if typename == "geometry_msgs/msg/PointStamped":
+        return T[typename](header=hdr, point=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0))
     if typename == "geometry_msgs/msg/WrenchStamped":
         return T[typename](
             header=hdr,
@@ -169,6 +191,8 @@ def write_bag(
         "/joint_states": joint_rate_hz,
         **{f"/foot/{s}/load_cells": force_rate_hz for s in SIDES},
         **{f"/foot/{s}/wrench": force_rate_hz for s in SIDES},
+        "/gait/zmp_ref": 1.0 / dt,
+        "/gait/contact_ref": 1.0 / dt,
     }
     rates.update(rates_hz or {})
     from grfguard.estimate.vfs import _robot_from_attrs
@@ -181,6 +205,8 @@ def write_bag(
     omit = set(omit)
     for topic, typename in BAG_TOPICS.items():
         if topic in omit:
+            continue
+        if topic.startswith("/gait/") and not all(c in log for c in (*ZMP_REF, *CONTACT_REF)):
             continue
         step = max(1, round(1.0 / (rates[topic] * dt)))
         idx = np.arange(0, len(t), step)
@@ -214,6 +240,13 @@ def write_bag(
             q = log[list(JOINT_COLUMNS)].to_numpy(float)
             qd = np.gradient(q, t, axis=0)
             vals = {"position": q[idx], "velocity": qd[idx], **_stamp_values(stamp_ns)}
+        elif topic == "/gait/zmp_ref":
+            tpl = _template(ts, typename, frame="world")
+            vals = {"point.x": cols[ZMP_REF[0]].to_numpy(float),
+                    "point.y": cols[ZMP_REF[1]].to_numpy(float), **_stamp_values(stamp_ns)}
+        elif topic == "/gait/contact_ref":
+            tpl = _template(ts, typename, n=2)
+            vals = {"data": cols[list(CONTACT_REF)].to_numpy(float)}
         else:
             side = topic.split("/")[2]
             f = np.stack([log[force_col(f"{side}{k}")].to_numpy(float)[idx]
@@ -244,6 +277,11 @@ def write_bag(
             meta = {k: v for k, v in log.attrs.items() if k != "source"}
             writer.set_custom_data("grfguard", json.dumps(_jsonable(meta), sort_keys=True))
             conns = [writer.add_connection(tp, v[0], typestore=ts) for tp, v in out.items()]
+            # the same metadata as a message: a single .mcap/.db3 file has no metadata.yaml
+            mconn = writer.add_connection(META_TOPIC, "std_msgs/msg/String", typestore=ts)
+            writer.write(mconn, int(recv_all.min()), bytes(ts.serialize_cdr(
+                ts.types["std_msgs/msg/String"](data=json.dumps(_jsonable(meta))),
+                "std_msgs/msg/String")))
             rows = [v[1] for v in out.values()]
             for k in order.tolist():
                 i = order_topic[k]

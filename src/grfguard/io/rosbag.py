@@ -31,6 +31,7 @@ import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.io import _cdr
+from grfguard.io.bagwrite import META_TOPIC
 from grfguard.io.schema import IMU_ACC, IMU_GYRO, IMU_QUAT, TIME, force_col
 from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES
 
@@ -243,14 +244,205 @@ def is_bag(path: str | Path) -> bool:
 class _Topic:
     name: str
     msgtype: str
-    raws: list[bytes]
+    packed: _cdr.Packed
     recv_ns: np.ndarray
     ros1: bool
+    groups: list[_cdr.Group] | None = None
+
+    @property
+    def raws(self) -> list[bytes]:
+        return [self.packed.get(i) for i in range(len(self.packed))]
+
+    def first(self) -> bytes:
+        return self.packed.get(0)
 
 
-def read_raw(path: str | Path, topics: list[str]) -> tuple[dict[str, _Topic], Any, dict]:
+def _storage_files(path: Path) -> list[Path] | None:
+    """The storage files of a bag if all are plain ``.mcap`` or all ``.db3``, else None."""
+    files = sorted(q for q in path.iterdir() if q.is_file()) if path.is_dir() else [path]
+    files = [q for q in files if q.suffix in (".mcap", ".db3")]
+    if not files or len({q.suffix for q in files}) != 1:
+        return None
+    return files
+
+
+def _raw_mcap(files: list[Path], topics: list[str]
+              ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
+    """Messages of ``topics`` from indexed MCAP files, vectorised: the chunk and message
+    indexes give every message's offset, so no record is parsed one by one. None if a
+    file has no chunk or message index (then the caller reads message by message)."""
+    from mcap.reader import make_reader
+
+    blobs: list[bytes] = []
+    base = 0
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {t: [] for t in topics}
+    u64, u32 = np.dtype("<u8"), np.dtype("<u4")
+    for f in files:
+        with f.open("rb") as fh:
+            summary = make_reader(fh).get_summary()
+            if summary is None or not summary.chunk_indexes:
+                return None
+            chans = {cid: ch.topic for cid, ch in summary.channels.items() if ch.topic in parts}
+            for ci in summary.chunk_indexes:
+                wanted = [c for c in ci.message_index_offsets if c in chans]
+                if not wanted:
+                    continue
+                if ci.compression not in ("", "zstd", "lz4"):
+                    return None
+                fh.seek(ci.chunk_start_offset)
+                blob = fh.read(ci.chunk_length + ci.message_index_length)
+                p = 9 + 16
+                usize = int(np.frombuffer(blob, u64, 1, p)[0])
+                p += 12
+                clen = int(np.frombuffer(blob, u32, 1, p)[0])
+                p += 4 + clen
+                rlen = int(np.frombuffer(blob, u64, 1, p)[0])
+                data = blob[p + 8 : p + 8 + rlen]
+                if ci.compression == "zstd":
+                    import zstandard
+
+                    data = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
+                elif ci.compression == "lz4":
+                    import lz4.frame
+
+                    data = lz4.frame.decompress(data)
+                blobs.append(data)
+                rec = np.frombuffer(data, dtype=np.uint8)
+                for c in wanted:
+                    mo = ci.message_index_offsets[c] - ci.chunk_start_offset
+                    nb = int(np.frombuffer(blob, u32, 1, mo + 11)[0])
+                    pairs = np.frombuffer(blob, u64, nb // 8, mo + 15).reshape(-1, 2)
+                    offs = pairs[:, 1].astype(np.int64)
+                    if offs.size and (rec[offs] != 0x05).any():
+                        return None  # the index does not point at message records
+                    rl = rec[offs[:, None] + 1 + np.arange(8)].copy().view(u64)[:, 0]
+                    parts[chans[c]].append((offs + 31 + base, rl.astype(np.int64) - 22,
+                                            pairs[:, 0].astype(np.int64)))
+                base += rec.size
+    joined = b"".join(blobs)
+    buf = np.frombuffer(joined, dtype=np.uint8)
+    out = {}
+    for t, ps in parts.items():
+        if not ps:
+            out[t] = (_cdr.Packed(buf, np.zeros(0, np.int64), np.zeros(0, np.int64), joined),
+                      np.zeros(0, np.int64))
+            continue
+        offs, lens, ts = (np.concatenate(x) for x in zip(*ps, strict=True))
+        out[t] = (_cdr.Packed(buf, offs, lens, joined), ts)
+    return out
+
+
+def _raw_sqlite(files: list[Path], topics: list[str]
+                ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
+    """Messages of ``topics`` from rosbag2 sqlite3 files: per file one query for topic
+    ids, times and lengths (as text, parsed by numpy) and one for the data, joined into
+    one buffer; no Python work per message beyond fetching its bytes."""
+    import sqlite3
+    from operator import itemgetter
+
+    blobs: list[bytes] = []
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {t: [] for t in topics}
+    base = 0
+    for f in files:
+        con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+        try:
+            ids = {i: n for n, i in con.execute("SELECT name, id FROM topics") if n in parts}
+            if not ids:
+                continue
+            where = f"topic_id IN ({','.join('?' * len(ids))})"
+            tid_s, ts_s, len_s = con.execute(
+                "SELECT group_concat(topic_id), group_concat(timestamp), "
+                "group_concat(length(data)) FROM (SELECT topic_id, timestamp, data FROM "
+                f"messages WHERE {where} ORDER BY id)", list(ids)).fetchone()
+            rows = con.execute(f"SELECT data FROM messages WHERE {where} ORDER BY id",
+                               list(ids)).fetchall()
+        except sqlite3.DatabaseError:
+            return None
+        finally:
+            con.close()
+        if not rows:
+            continue
+        tid, tstamp, lens = (np.fromstring(x, dtype=np.int64, sep=",")
+                             for x in (tid_s, ts_s, len_s))
+        data = b"".join(map(itemgetter(0), rows))
+        if not (tid.size == tstamp.size == lens.size == len(rows)) or lens.sum() != len(data):
+            return None
+        offs = np.zeros(lens.size, dtype=np.int64)
+        np.cumsum(lens[:-1], out=offs[1:])
+        for i, name in ids.items():
+            sel = tid == i
+            parts[name].append((offs[sel] + base, lens[sel], tstamp[sel]))
+        blobs.append(data)
+        base += len(data)
+    joined = b"".join(blobs)
+    buf = np.frombuffer(joined, dtype=np.uint8)
+    out = {}
+    for t, ps in parts.items():
+        if ps:
+            o, ln, ts_ = (np.concatenate(x) for x in zip(*ps, strict=True))
+        else:
+            o = ln = ts_ = np.zeros(0, dtype=np.int64)
+        out[t] = (_cdr.Packed(buf, o, ln, joined), ts_)
+    return out
+
+
+def _sqlite_direct(path: Path, files: list[Path], topics: list[str]
+                   ) -> tuple[dict[str, _Topic], Any, dict] | None:
+    """sqlite3 storage without ``rosbags``' reader (which counts every topic's messages
+    on opening): topics and types from the ``topics`` table, standard ROS 2 message
+    definitions. None when a type is not standard or the file is not plain rosbag2."""
+    import sqlite3
+
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    types: dict[str, set[str]] = {}
+    try:
+        for f in files:
+            con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+            try:
+                for name, typ, fmt in con.execute(
+                        "SELECT name, type, serialization_format FROM topics"):
+                    if fmt != "cdr":
+                        return None
+                    types.setdefault(name, set()).add(typ)
+            finally:
+                con.close()
+    except sqlite3.DatabaseError:
+        return None
+    missing = [t for t in topics if t not in types]
+    if missing:
+        have = ", ".join(f"{t} ({sorted(v)[0]})" for t, v in sorted(types.items()))
+        raise LogFormatError(f"bag {path}: topic(s) {missing} not found; the bag has: {have}. "
+                             "Fix the topic names in the topics map.")
+    for t in topics:
+        if len(types[t]) > 1:
+            raise LogFormatError(f"bag {path}: topic {t} has several types {sorted(types[t])}")
+        if next(iter(types[t])) not in ts.fielddefs:
+            return None
+    want = [*topics, META_TOPIC] if META_TOPIC in types else topics
+    got = _raw_sqlite(files, want)
+    if got is None:
+        return None
+    meta: dict[str, Any] = {}
+    if META_TOPIC in got and len(got[META_TOPIC][0]):
+        try:
+            meta = json.loads(ts.deserialize_cdr(got[META_TOPIC][0].get(0),
+                                                 "std_msgs/msg/String").data)
+        except ValueError:
+            meta = {}
+    out = {t: _Topic(t, next(iter(types[t])), got[t][0], got[t][1], False) for t in topics}
+    return out, ts, meta
+
+
+def read_raw(path: str | Path, topics: list[str], fast: bool = True
+             ) -> tuple[dict[str, _Topic], Any, dict]:
     """Serialised messages of ``topics`` (only those are read), their typestore and the
     bag's grfguard metadata (``custom_data``), if any.
+
+    With ``fast`` (default), MCAP files are read through their indexes and sqlite3
+    files with one query; otherwise (and for ROS 1 or compressed bags) message by
+    message through ``rosbags``.
 
     Raises:
         LogFormatError: The bag cannot be read, or a topic is not in it (the message
@@ -261,6 +453,11 @@ def read_raw(path: str | Path, topics: list[str]) -> tuple[dict[str, _Topic], An
     path = Path(path)
     if not path.exists():
         raise LogFormatError(f"bag {path} does not exist")
+    files = _storage_files(path) if fast else None
+    if files is not None and files[0].suffix == ".db3":
+        direct = _sqlite_direct(path, files, topics)
+        if direct is not None:
+            return direct
     try:
         reader = AnyReader([path])
         reader.open()
@@ -282,21 +479,35 @@ def read_raw(path: str | Path, topics: list[str]) -> tuple[dict[str, _Topic], An
             types = {c.msgtype for c in by_topic[t]}
             if len(types) > 1:
                 raise LogFormatError(f"bag {path}: topic {t} has several types {sorted(types)}")
-        cid = {c.id: c.topic for c in conns}
-        raws: dict[str, list[bytes]] = {t: [] for t in topics}
-        recv: dict[str, list[int]] = {t: [] for t in topics}
-        for conn, ts, raw in reader.messages(connections=conns):
-            t = cid[conn.id]
-            raws[t].append(raw)
-            recv[t].append(ts)
         ros1 = not reader.is2
-        out = {
-            t: _Topic(t, by_topic[t][0].msgtype, raws[t], np.asarray(recv[t], dtype=np.int64),
-                      ros1)
-            for t in topics
-        }
+        got = None
+        files = _storage_files(path) if fast and not ros1 else None
+        if files is not None:
+            compressed = any(getattr(r, "compression_mode", None) for r in reader.readers)
+            if not compressed:
+                reader_fn = _raw_mcap if files[0].suffix == ".mcap" else _raw_sqlite
+                got = reader_fn(files, topics)
+        if got is None:
+            cid = {c.id: c.topic for c in conns}
+            raws: dict[str, list[bytes]] = {t: [] for t in topics}
+            recv: dict[str, list[int]] = {t: [] for t in topics}
+            for conn, ts, raw in reader.messages(connections=conns):
+                t = cid[conn.id]
+                raws[t].append(raw)
+                recv[t].append(ts)
+            got = {t: (_cdr.Packed.from_list(raws[t]), np.asarray(recv[t], dtype=np.int64))
+                   for t in topics}
+        out = {t: _Topic(t, by_topic[t][0].msgtype, got[t][0], got[t][1], ros1)
+               for t in topics}
         meta: dict[str, Any] = {}
-        for r in getattr(reader, "readers", []):
+        if META_TOPIC in by_topic:  # written by grfguard's bag writer
+            for c, _, data in reader.messages(connections=by_topic[META_TOPIC]):
+                try:
+                    meta = json.loads(reader.deserialize(data, c.msgtype).data)
+                except (ValueError, AttributeError):
+                    meta = {}
+                break
+        for r in getattr(reader, "readers", []) if not meta else []:
             custom = getattr(getattr(getattr(r, "storage", None), "metadata", None),
                              "custom", None) or getattr(getattr(r, "metadata", None),
                                                         "custom", None)
@@ -317,10 +528,10 @@ def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
     With ``want_names`` also the ``name`` list per message group (JointState); a
     sequence whose length changes between messages is padded with NaN.
     """
-    n = len(top.raws)
+    n = len(top.packed)
     if n == 0:
         raise LogFormatError(f"topic {top.name} has no messages")
-    first = _cdr.layout_of(top.raws[0], top.msgtype, typestore, top.ros1)
+    first = _cdr.layout_of(top.first(), top.msgtype, typestore, top.ros1)
     for p in paths:
         if p not in first.leaves:
             numeric = ", ".join(k for k in first.leaves if not k.startswith("header."))
@@ -332,7 +543,9 @@ def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
         return _decode_per_message(top, typestore, paths, want_names)
     out: dict[str, np.ndarray] = {}
     names: list[list[str]] | None = [[] for _ in range(n)] if want_names else None
-    groups = _cdr.split_groups(top.raws, top.msgtype, typestore, top.ros1)
+    if top.groups is None:
+        top.groups = _cdr.split_groups(top.packed, top.msgtype, typestore, top.ros1)
+    groups = top.groups
     for g in groups:
         for p in paths:
             v = _cdr.field(g, p)
@@ -387,7 +600,9 @@ def _times(top: _Topic, typestore: Any, stamps: str, vectorised: bool
            ) -> tuple[np.ndarray, str]:
     """Message times [ns] and which kind they are."""
     if stamps == "header":
-        lay = _cdr.layout_of(top.raws[0], top.msgtype, typestore, top.ros1)
+        if not len(top.packed):
+            raise LogFormatError(f"topic {top.name} has no messages")
+        lay = _cdr.layout_of(top.first(), top.msgtype, typestore, top.ros1)
         if _STAMP_SEC in lay.leaves:
             v, _ = _decode(top, typestore, [_STAMP_SEC, _STAMP_NSEC], vectorised)
             ns = v[_STAMP_SEC].astype(np.int64) * 1_000_000_000 + v[_STAMP_NSEC].astype(
@@ -445,6 +660,7 @@ def read_bag(
     topics_map: TopicsMap | str | Path | None = None,
     *,
     vectorised: bool = True,
+    fast_read: bool | None = None,
 ) -> pd.DataFrame:
     """A grfguard log from a ROS bag.
 
@@ -453,10 +669,13 @@ def read_bag(
         topics_map: A :class:`TopicsMap`, a TOML path, or None for the example map.
         vectorised: Decode with numpy (default); False deserialises every message with
             ``rosbags`` (the reference, same result, much slower).
+        fast_read: Read raw messages through the MCAP index / one sqlite query
+            (default: as ``vectorised``); False reads them one by one with ``rosbags``.
 
     Returns:
-        The log: ``time`` [s since the first grid row], IMU, joints, forces, extra
-        columns, ``import_gap`` (bool); import details in ``attrs["ros_import"]``.
+        The log: ``time`` [s since the first IMU message, at ``attrs["ros_import"]
+        ["t0_ns"]``], IMU, joints, forces, extra columns, ``import_gap`` (bool); import
+        details in ``attrs["ros_import"]``.
 
     Raises:
         LogFormatError: Missing topic or field, unknown joint names, a topic too slow
@@ -465,7 +684,8 @@ def read_bag(
     if topics_map is None:
         topics_map = EXAMPLE_MAP
     tmap = topics_map if isinstance(topics_map, TopicsMap) else load_topics_map(topics_map)
-    raw, typestore, meta = read_raw(path, tmap.topics())
+    raw, typestore, meta = read_raw(
+        path, tmap.topics(), fast=vectorised if fast_read is None else fast_read)
     report: list[str] = []
     stamps_used: dict[str, str] = {}
 
@@ -526,7 +746,7 @@ def read_bag(
                           f"{b:.3f} s (no message); grid rows inside are NaN and flagged "
                           "import_gap")
 
-    cols: dict[str, np.ndarray] = {TIME: grid - grid[0]}
+    cols: dict[str, np.ndarray] = {TIME: grid}
     interp_used: dict[str, str] = {}
 
     def put(name: str, col: str, y: np.ndarray, how: str) -> None:
@@ -613,10 +833,10 @@ def read_bag(
     attrs["ros_import"] = {
         "bag": str(path),
         "rate_hz": rate,
-        "t0_ns": t0_ns + int(round(grid[0] * 1e9)),
+        "t0_ns": t0_ns,
         "stamps": stamps_used,
         "topic_rates_hz": rates,
-        "messages": {t: len(raw[t].raws) for t in raw},
+        "messages": {t: len(raw[t].packed) for t in raw},
         "interpolation": interp_used,
         "gaps": gaps,
         "decoder": "vectorised" if vectorised else "per-message",

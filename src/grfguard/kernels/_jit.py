@@ -16,3 +16,27 @@ import numba
 njit = functools.partial(numba.njit, cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 __all__ = ["njit"]
+
+
+def _fma_intrinsic():
+    from llvmlite import ir
+    from numba.core import cgutils, types
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def fma(typingctx, a, b, c):
+        """Fused ``a * b + c`` (one rounding), as numpy's BLAS-backed matmul computes it."""
+        sig = types.float64(types.float64, types.float64, types.float64)
+
+        def codegen(context, builder, signature, args):
+            fnty = ir.FunctionType(ir.DoubleType(), [ir.DoubleType()] * 3)
+            fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.fma.f64")
+            return builder.call(fn, args)
+
+        return sig, codegen
+
+    return fma
+
+
+fma = _fma_intrinsic()
+__all__ += ["fma"]

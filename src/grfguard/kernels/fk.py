@@ -21,10 +21,13 @@ import numpy as np
 from grfguard.errors import ConfigError
 from grfguard.kernels._jit import njit
 
-__all__ = ["TreeModel", "fk_tree", "fk_sites", "FREE", "BALL", "SLIDE", "HINGE"]
+__all__ = ["TreeModel", "fk_tree", "fk_sites", "fk_batch", "N_WORK", "FREE", "BALL", "SLIDE",
+           "HINGE"]
 
 FREE, BALL, SLIDE, HINGE = 0, 1, 2, 3
 _MINVAL = 1e-15
+#: Scratch floats :func:`fk_tree` needs.
+N_WORK = 27
 
 
 @dataclass(frozen=True)
@@ -235,7 +238,8 @@ def _local2global(xpos_out, xmat_out, pos, quat, body, sameframe, xpos, xquat, x
 @njit
 def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
             body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
-            jnt_pos, qpos0, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com, mass_subtree):
+            jnt_pos, qpos0, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com, mass_subtree,
+            work):
     """``mj_kinematics`` (bodies and inertial frames) and the subtree CoM of ``mj_comPos``.
 
     ``qpos`` is a work copy of ``qpos_in`` (its free/ball quaternions get normalised);
@@ -260,14 +264,14 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     for k in (0, 4, 8):
         xmat[0, k] = 1.0
         ximat[0, k] = 1.0
-    pos = np.empty(3)
-    quat = np.empty(4)
-    vec = np.empty(3)
-    vec1 = np.empty(3)
-    xanchor = np.empty(3)
-    qloc = np.empty(4)
-    tmp4 = np.empty(4)
-    tmp3 = np.empty(3)
+    pos = work[0:3]
+    quat = work[3:7]
+    vec = work[7:10]
+    vec1 = work[10:13]
+    xanchor = work[13:16]
+    qloc = work[16:20]
+    tmp4 = work[20:24]
+    tmp3 = work[24:27]
     for i in range(1, nb):
         ja = body_jntadr[i]
         if body_jntnum[i] == 1 and jnt_type[ja] == FREE:
@@ -346,11 +350,38 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
 
 @njit
 def fk_sites(sites, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
-             ximat, site_xpos, site_xmat):
-    """World pose of the chosen ``sites`` (k,) into ``site_xpos (k, 3)``, ``site_xmat (k, 9)``."""
-    tmp4 = np.empty(4)
-    tmp3 = np.empty(3)
+             ximat, site_xpos, site_xmat, work):
+    """World pose of the chosen ``sites`` (k,) into ``site_xpos (k, 3)``, ``site_xmat (k, 9)``
+    (``work``: at least 7 floats)."""
+    tmp4 = work[0:4]
+    tmp3 = work[4:7]
     for n in range(sites.shape[0]):
         s = sites[n]
         _local2global(site_xpos[n], site_xmat[n], site_pos[s], site_quat[s], site_body[s],
                       site_sameframe[s], xpos, xquat, xmat, xipos, ximat, tmp4, tmp3)
+
+
+@njit
+def fk_batch(Q, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
+             body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
+             out_com, out_xipos):
+    """Kinematics of every row of ``Q`` (T, nq): whole-robot CoM ``out_com`` (T, 3) (subtree
+    of body 1) and body CoMs ``out_xipos`` (T, nb, 3) [m] (throughput benchmark and batch
+    use)."""
+    nb = body_parent.shape[0]
+    nq = qpos0.shape[0]
+    qpos = np.empty(nq)
+    xpos = np.empty((nb, 3))
+    xquat = np.empty((nb, 4))
+    xmat = np.empty((nb, 9))
+    xipos = np.empty((nb, 3))
+    ximat = np.empty((nb, 9))
+    stc = np.empty((nb, 3))
+    ms = np.empty(nb)
+    work = np.empty(N_WORK)
+    for t in range(Q.shape[0]):
+        fk_tree(Q[t], body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
+                body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
+                jnt_pos, qpos0, qpos, xpos, xquat, xmat, xipos, ximat, stc, ms, work)
+        out_com[t, :] = stc[1]
+        out_xipos[t, :, :] = xipos
