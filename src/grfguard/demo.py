@@ -17,11 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from grfguard.config import monitor_config
 from grfguard.evaluate.frame import evaluate_frame
 from grfguard.io.logio import to_jsonable, write_log
+from grfguard.io.safe import atomic_write_text
 
 __all__ = ["PAPER_FAULTS", "RUNS", "run_demo", "plot_corner_forces"]
 
@@ -65,14 +67,14 @@ def run_demo(
     faulty = _walk_with_faults(out_dir, duration, seed, console)
     runs, results = _run_methods(faulty, out_dir, console)
     console.print("[bold]4/5[/] writing figures and metrics")
-    (out_dir / "metrics.json").write_text(json.dumps(to_jsonable(results), indent=2))
-    (out_dir / "metrics.md").write_text(_metrics_markdown(results))
+    atomic_write_text(out_dir / "metrics.json", json.dumps(to_jsonable(results), indent=2))
+    atomic_write_text(out_dir / "metrics.md", _metrics_markdown(results))
     n_png = _write_figures(runs, results, out_dir)
     console.print("[bold]5/5[/] writing the HTML report")
     report = _write_reports(runs, results, out_dir)
     _print_table(results, out)
-    console.print(f"{n_png} figures in {out_dir / 'figures'}")
-    out.print(f"report: {report.resolve()}")
+    console.print(f"{n_png} figures in {escape(str(out_dir / 'figures'))}")
+    out.print(f"report: {escape(str(report.resolve()))}")
     return results
 
 

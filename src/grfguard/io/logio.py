@@ -217,6 +217,8 @@ def _check_metadata(meta: Any, path: Path) -> None:
     robot = meta.get("robot")
     if robot is None or isinstance(robot, str):
         return
+    if isinstance(robot, dict) and ("model" in robot or "sensing" in meta):
+        return  # a described robot (Talos, G1, ...): checked by io.robot_schema
     if not isinstance(robot, dict):
         raise LogFormatError(
             f"{path}: metadata key 'robot' must be a JSON object with the robot "
