@@ -12,10 +12,12 @@ from grfguard.errors import ConfigError
 __all__ = ["read_any"]
 
 
-def read_any(path: str | Path, topics_map: str | Path | None = None) -> pd.DataFrame:
+def read_any(
+    path: str | Path, topics_map: str | Path | None = None, time_order: str = "strict"
+) -> pd.DataFrame:
     """The log in ``path``: a ROS bag (rosbag2 directory, ``.mcap``, ``.db3``, ROS 1
     ``.bag``) imported with ``topics_map`` (default: the example map), else a Parquet/CSV
-    log read with :func:`grfguard.io.logio.load_log`.
+    log read with :func:`grfguard.io.logio.load_log` (``time_order`` as there).
 
     Raises:
         ConfigError: A topics map was given for a file that is not a bag.
@@ -43,4 +45,4 @@ def read_any(path: str | Path, topics_map: str | Path | None = None) -> pd.DataF
         )
     from grfguard.io.logio import load_log
 
-    return load_log(p)
+    return load_log(p, time_order=time_order)
