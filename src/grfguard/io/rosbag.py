@@ -334,9 +334,9 @@ def _raw_mcap(files: list[Path], topics: list[str]
 
 def _raw_sqlite(files: list[Path], topics: list[str]
                 ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
-    """Messages of ``topics`` from rosbag2 sqlite3 files: per file one query for topic
-    ids, times and lengths (as text, parsed by numpy) and one for the data, joined into
-    one buffer; no Python work per message beyond fetching its bytes."""
+    """Messages of ``topics`` from rosbag2 sqlite3 files: per file one query returns the
+    topic ids, times and lengths (as text, parsed by numpy) and the data concatenated
+    into one buffer; no Python work per message."""
     import sqlite3
     from operator import itemgetter
 
@@ -350,22 +350,26 @@ def _raw_sqlite(files: list[Path], topics: list[str]
             if not ids:
                 continue
             where = f"topic_id IN ({','.join('?' * len(ids))})"
-            tid_s, ts_s, len_s = con.execute(
+            # one scan; the blobs concatenated by sqlite itself (checked against the
+            # lengths below; else message by message)
+            tid_s, ts_s, len_s, data = con.execute(
                 "SELECT group_concat(topic_id), group_concat(timestamp), "
-                "group_concat(length(data)) FROM (SELECT topic_id, timestamp, data FROM "
-                f"messages WHERE {where} ORDER BY id)", list(ids)).fetchone()
-            rows = con.execute(f"SELECT data FROM messages WHERE {where} ORDER BY id",
-                               list(ids)).fetchall()
+                "group_concat(length(data)), CAST(group_concat(data, '') AS BLOB) FROM "
+                f"(SELECT topic_id, timestamp, data FROM messages WHERE {where} ORDER BY id)",
+                list(ids)).fetchone()
+            if tid_s is None:
+                continue
+            tid, tstamp, lens = (np.fromstring(x, dtype=np.int64, sep=",")
+                                 for x in (tid_s, ts_s, len_s))
+            if not isinstance(data, bytes) or lens.sum() != len(data):
+                rows = con.execute(f"SELECT data FROM messages WHERE {where} ORDER BY id",
+                                   list(ids)).fetchall()
+                data = b"".join(map(itemgetter(0), rows))
         except sqlite3.DatabaseError:
             return None
         finally:
             con.close()
-        if not rows:
-            continue
-        tid, tstamp, lens = (np.fromstring(x, dtype=np.int64, sep=",")
-                             for x in (tid_s, ts_s, len_s))
-        data = b"".join(map(itemgetter(0), rows))
-        if not (tid.size == tstamp.size == lens.size == len(rows)) or lens.sum() != len(data):
+        if not (tid.size == tstamp.size == lens.size) or lens.sum() != len(data):
             return None
         offs = np.zeros(lens.size, dtype=np.int64)
         np.cumsum(lens[:-1], out=offs[1:])
@@ -521,12 +525,16 @@ def read_raw(path: str | Path, topics: list[str], fast: bool = True
         reader.close()
 
 
+_Names = tuple[list[tuple[str, ...]], np.ndarray]
+
+
 def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
-            want_names: bool = False) -> tuple[dict[str, np.ndarray], list[list[str]] | None]:
+            want_names: bool = False) -> tuple[dict[str, np.ndarray], _Names | None]:
     """Fields ``paths`` of every message, in message order: ``(n,)`` or ``(n, count)``.
 
-    With ``want_names`` also the ``name`` list per message group (JointState); a
-    sequence whose length changes between messages is padded with NaN.
+    With ``want_names`` also the ``name`` lists (JointState): the distinct lists and, per
+    message, the index of its list. A sequence whose length changes between messages is
+    padded with NaN.
     """
     n = len(top.packed)
     if n == 0:
@@ -542,7 +550,8 @@ def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
     if not vectorised:
         return _decode_per_message(top, typestore, paths, want_names)
     out: dict[str, np.ndarray] = {}
-    names: list[list[str]] | None = [[] for _ in range(n)] if want_names else None
+    keys: list[tuple[str, ...]] = []
+    codes = np.full(n, -1, dtype=np.int64)
     if top.groups is None:
         top.groups = _cdr.split_groups(top.packed, top.msgtype, typestore, top.ros1)
     groups = top.groups
@@ -560,15 +569,16 @@ def _decode(top: _Topic, typestore: Any, paths: list[str], vectorised: bool,
                 v2[:, : v.shape[1]] = v
                 v = v2
             out[p][g.index] = v
-        if names is not None:
-            nm = list(g.layout.strings.get("name", []))
-            for i in g.index.tolist():
-                names[i] = nm
-    return out, names
+        if want_names:
+            nm = tuple(g.layout.strings.get("name", []))
+            if nm not in keys:
+                keys.append(nm)
+            codes[g.index] = keys.index(nm)
+    return out, ((keys, codes) if want_names else None)
 
 
 def _decode_per_message(top: _Topic, typestore: Any, paths: list[str], want_names: bool
-                        ) -> tuple[dict[str, np.ndarray], list[list[str]] | None]:
+                        ) -> tuple[dict[str, np.ndarray], _Names | None]:
     """The reference: one ``rosbags`` message object per message."""
     deser = typestore.deserialize_ros1 if top.ros1 else typestore.deserialize_cdr
     cols: dict[str, list[Any]] = {p: [] for p in paths}
@@ -593,7 +603,11 @@ def _decode_per_message(top: _Topic, typestore: Any, paths: list[str], want_name
             out[p] = arr
         else:
             out[p] = np.asarray(vals, dtype=float)
-    return out, names
+    if names is None:
+        return out, None
+    keys: list[tuple[str, ...]] = list(dict.fromkeys(tuple(x) for x in names))
+    index = {k: i for i, k in enumerate(keys)}
+    return out, (keys, np.asarray([index[tuple(x)] for x in names], dtype=np.int64))
 
 
 def _times(top: _Topic, typestore: Any, stamps: str, vectorised: bool
@@ -779,9 +793,10 @@ def read_bag(
     v, names = _decode(js, typestore, [tmap.joints_field], vectorised, want_names=True)
     arr = v[tmap.joints_field]
     assert names is not None
-    jvals = np.full((len(names), len(JOINT_NAMES)), np.nan)
-    for key in {tuple(n) for n in names}:
-        rows = np.asarray([tuple(n) == key for n in names])
+    keys, codes = names
+    jvals = np.full((len(codes), len(JOINT_NAMES)), np.nan)
+    for ki, key in enumerate(keys):
+        rows = codes == ki
         pos = {n: i for i, n in enumerate(key)}
         missing = [f"{j} (as {tmap.joint_names[j]!r})" for j in JOINT_NAMES
                    if tmap.joint_names[j] not in pos]
