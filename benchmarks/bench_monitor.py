@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import update_section  # noqa: E402
 from calibrate_default_thresholds import walk_with_vfs  # noqa: E402
 
-from grfguard.cli import monitor_config  # noqa: E402
+from grfguard.config import monitor_config  # noqa: E402
 from grfguard.detect.monitor import Monitor, MonitorConfig  # noqa: E402
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS  # noqa: E402
 from grfguard.evaluate.detection import evaluate_detection  # noqa: E402

@@ -1,9 +1,9 @@
 """Report benchmark: HTML size and Chromium load time for long logs.
 
-For synthetic ``grfguard run`` outputs (``grfguard.report._synthetic``, paper fault
+For synthetic ``grfguard run`` outputs (``tests/helpers/synthetic.py``, paper fault
 scenario, 1 kHz) of 1 and 10 minutes: time to build the report, file size (and how much
 of it is the inlined plotly.js), and in headless Chromium with no network
-(``grfguard.report._browser``): navigation to the ``load`` event, navigation to every
+(``tests/helpers/browser.py``): navigation to the ``load`` event, navigation to every
 figure drawn (``window.grfguardReport.ready``), and the in-page plotting time. Also the
 time of ``write_png_figures``. Updates only the ``## Report`` section of BENCHMARKS.md.
 
@@ -25,6 +25,7 @@ from pathlib import Path
 from _common import update_section
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the synthetic run and the browser driver: test helpers
 SECTION = "## Report"
 
 
@@ -45,9 +46,9 @@ def main() -> int:
     from plotly.offline import get_plotlyjs
 
     from grfguard.report import write_html_report
-    from grfguard.report._browser import find_chromium, load_report
-    from grfguard.report._synthetic import synthetic_run
     from grfguard.report.figures import write_png_figures
+    from helpers.browser import find_chromium, load_report
+    from helpers.synthetic import synthetic_run
 
     chromium = find_chromium()
     if chromium is None:

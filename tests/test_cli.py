@@ -92,7 +92,7 @@ def test_inject_run_evaluate_report(short_walk, tmp_path) -> None:
 
 
 def test_paper_method_uses_the_papers_virtual_sensor(short_walk, tmp_path) -> None:
-    from grfguard.cli import monitor_config
+    from grfguard.config import monitor_config
     from grfguard.estimate.config import VFSConfig
 
     assert monitor_config(method="paper").vfs == VFSConfig.paper()

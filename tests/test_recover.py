@@ -1,4 +1,4 @@
-"""Recovery building blocks: foot balance, hand-over blend, never NaN."""
+"""Recovery building blocks: hand-over blend, never NaN."""
 
 from __future__ import annotations
 
@@ -6,12 +6,7 @@ import math
 
 import pytest
 
-from grfguard.recover import HandOver, foot_balance
-
-
-def test_foot_balance() -> None:
-    assert foot_balance(1000.0, [200.0, 300.0, 100.0]) == pytest.approx(400.0)
-    assert foot_balance(100.0, [200.0, 300.0]) == 0.0  # clipped, never negative
+from grfguard.recover import HandOver
 
 
 def test_hand_over_is_smooth_and_reaches_target() -> None:

@@ -1,6 +1,6 @@
 """Reports: the standalone HTML report, the summary table and the PNG figures.
 
-Built on the seeded synthetic run of :mod:`grfguard.report._synthetic` (paper scenario:
+Built on the seeded synthetic run of :mod:`helpers.synthetic` (paper scenario:
 at 5 s r1 frozen 0, r2 +100 N, r3 +15 N/s, r4 -100 N; a 0.15 s false alarm on l2 at 2 s),
 and on a real simulated walk when the monitor is available.
 """
@@ -21,8 +21,8 @@ from grfguard.errors import ConfigError, LogFormatError
 from grfguard.model.robot import SENSOR_NAMES
 from grfguard.report import build_html_report, sensor_summary, write_html_report
 from grfguard.report._decimate import intervals, minmax_indices, step_edges, window_mask
-from grfguard.report._synthetic import synthetic_run
 from grfguard.report.summary import normalize_metrics
+from helpers.synthetic import synthetic_run
 
 # ------------------------------------------------------------------------------ helpers
 
@@ -125,7 +125,7 @@ def test_summary_fallback_on_paper_scenario(run_df: pd.DataFrame) -> None:
                                 ("r3", "drift", 0.9), ("r4", "offset", 0.3)):
         assert s.loc[sensor, "state"] == "detected"
         assert s.loc[sensor, "injected_kind"] == kind
-        assert s.loc[sensor, "detected_kind"] == kind
+        assert s.loc[sensor, "kind_estimated"] == kind
         assert s.loc[sensor, "delay_s"] == pytest.approx(delay, abs=1.5e-3)
         assert s.loc[sensor, "false_alarms"] == 0
     assert s.loc["r2", "true_size_n"] == pytest.approx(100.0)

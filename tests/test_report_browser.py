@@ -1,7 +1,7 @@
 """The HTML report in a real headless Chromium with no network.
 
 Driver: the DevTools protocol over ``--remote-debugging-pipe`` (stdlib only, see
-``grfguard.report._browser``): no chromedriver to match, no browser download, no port.
+``helpers.browser``): no chromedriver to match, no browser download, no port.
 
 Chromium missing: every test here FAILS under CI (``CI`` set; ``.ci/run`` installs
 Debian's ``chromium``) and the module is skipped only on a developer machine without it.
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from grfguard.report import write_html_report
-from grfguard.report._browser import find_chromium, load_report
-from grfguard.report._synthetic import synthetic_run
+from helpers.browser import find_chromium, load_report
+from helpers.synthetic import synthetic_run
 
 CHROMIUM = find_chromium()
 if CHROMIUM is None and not os.environ.get("CI"):
@@ -115,7 +115,7 @@ def test_network_is_really_cut(tmp_path: Path) -> None:
 
 def test_time_axes_are_linked(tmp_path: Path) -> None:
     """Zooming one figure's time axis zooms every figure (checked in the live page)."""
-    from grfguard.report._browser import ChromiumSession
+    from helpers.browser import ChromiumSession
 
     html = write_html_report(synthetic_run(duration_s=6.0, seed=6), tmp_path / "link.html")
     with ChromiumSession(_require_chromium()) as cr:

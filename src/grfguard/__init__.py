@@ -41,7 +41,7 @@ __all__ = [
 # Heavier parts (MuJoCo, scipy) load on first use.
 _LAZY = {
     "VirtualForceSensor": ("grfguard.estimate.vfs", "VirtualForceSensor"),
-    "Monitor": ("grfguard.detect.monitor", "Monitor"),
+    "Monitor": ("grfguard.pipeline", "Monitor"),
     "simulate": ("grfguard.sim", "simulate"),
 }
 

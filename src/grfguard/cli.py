@@ -6,20 +6,20 @@ on bad input are reported in one line saying what to fix, with exit code 2.
 
 from __future__ import annotations
 
-import functools
 import json
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
+from grfguard._cliutil import ROBOT_HELP
+from grfguard._term import cli_friendly as _friendly
+from grfguard._term import cli_say as _say
+from grfguard._term import console, out  # noqa: F401  (re-exported for cli_* modules)
+from grfguard._term import progress as _progress
 from grfguard.cli_campaign import campaign_app
-from grfguard.errors import GrfguardError
 
 app = typer.Typer(
     name="grfguard",
@@ -28,52 +28,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-robot_app = typer.Typer(help="Robot descriptions.", no_args_is_help=True)
-app.add_typer(robot_app, name="robot")
 app.add_typer(campaign_app, name="campaign")
-
-console = Console(stderr=True)
-out = Console()
-
-
-def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Turn grfguard errors into one red line and exit code 2."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except GrfguardError as exc:
-            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
-            raise typer.Exit(2) from None
-
-    return wrapper
-
-
-def _progress(description: str) -> Progress:
-    return Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>5.1f}%"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-        disable=not console.is_terminal,
-    )
-
-
-# ----------------------------------------------------------------------------- robot
-@robot_app.command("show")
-@_friendly
-def robot_show(
-    robot: Annotated[Path | None, typer.Option(help="Robot TOML to validate and print.")] = None,
-) -> None:
-    """Print the robot description as TOML (the SURALP default: copy and edit it)."""
-    from grfguard.model.robot import load_robot
-
-    sys.stdout.write(load_robot(robot).to_toml())
-
 
 # -------------------------------------------------------------------------- simulate
 @app.command()
@@ -87,16 +42,33 @@ def simulate(
         float | None, typer.Option(help="Double-support fraction of a step (0-1).")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the sensor noise.")] = 0,
-    robot: Annotated[Path | None, typer.Option(help="Robot TOML (default SURALP).")] = None,
+    robot: Annotated[
+        str | None, typer.Option(help=ROBOT_HELP + " Also talos, g1. Default SURALP.")
+    ] = None,
     noise: Annotated[str, typer.Option(help="Sensor noise: default or none.")] = "default",
+    rate: Annotated[float, typer.Option(help="Log sample rate [Hz] (divides 1000).")] = 1000.0,
+    reality: Annotated[
+        str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
+    ] = None,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
+    from grfguard._cliutil import check_seed, resolve_robot
+    from grfguard.cli_robot import is_described_robot, simulate_described
     from grfguard.io.logio import write_log
-    from grfguard.model.robot import load_robot
+    from grfguard.io.safe import check_output
+    from grfguard.model.robot import SURALP
     from grfguard.sim import GaitConfig, NoiseConfig
     from grfguard.sim import simulate as _simulate
+    from grfguard.sim.reality import load_reality
 
-    rob = load_robot(robot)
+    check_seed(seed)
+    if is_described_robot(robot):
+        check_output(output, inputs=[robot], what="log")
+        simulate_described(robot, output, duration, step_length, step_period,
+                           double_support, seed, noise, rate)
+        return
+    rob = resolve_robot(robot) or SURALP
+    check_output(output, inputs=[robot], what="log")
     gait_kw: dict[str, Any] = {"duration": duration}
     if step_length is not None:
         gait_kw["step_length"] = step_length
@@ -114,11 +86,14 @@ def simulate(
             noise=noise_cfg,
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
+            reality=load_reality(reality),
         )
+    if rate != 1000.0:
+        from grfguard.sim.wholebody import decimate
+
+        df = decimate(df, rate)
     write_log(df, output)
-    console.print(
-        f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}"
-    )
+    _say(f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}")
 
 
 def _noise_config(name: str, cls: Any) -> Any:
@@ -150,26 +125,38 @@ def inject(
     seed: Annotated[int, typer.Option(help="Seed of random fault kinds (noise, spikes).")] = 0,
 ) -> None:
     """Inject sensor faults into a log (writes fault_<s> / fault_kind_<s> truth columns)."""
+    from grfguard._cliutil import check_faults_toml, check_seed
     from grfguard.errors import FaultSpecError
-    from grfguard.faults import inject_faults, load_faults, parse_fault_spec
+    from grfguard.faults import inject_faults, parse_fault_spec
     from grfguard.io.logio import read_log, write_log
+    from grfguard.io.safe import check_output
 
+    check_seed(seed)
     specs = [parse_fault_spec(s) for s in (fault or [])]
     if faults_file is not None:
-        specs.extend(load_faults(faults_file))
+        specs.extend(check_faults_toml(faults_file))
     if not specs:
         raise FaultSpecError("no fault given: use --fault r2=offset:100@5 or --faults FILE.toml")
+    check_output(output, inputs=[log, faults_file], what="faulty log")
     df = read_log(log)
+    t0, t1 = float(df["time"].iloc[0]), float(df["time"].iloc[-1])
+    for spec in specs:
+        if spec.start > t1 or spec.end <= t0:
+            raise FaultSpecError(
+                f"fault {spec.sensor}={spec.kind}@{spec.start:g}: it lies outside the log "
+                f"{log} (time {t0:g} s to {t1:g} s), so nothing would be injected; give a "
+                "start time inside the log"
+            )
     faulty = inject_faults(df, specs, seed=seed)
     write_log(faulty, output)
-    console.print(f"wrote {output} with {len(specs)} fault(s)")
+    _say(f"wrote {output} with {len(specs)} fault(s)")
 
 
 # ------------------------------------------------------------------------------- run
 @app.command()
 @_friendly
 def run(
-    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV).")],
+    log: Annotated[Path, typer.Argument(help="Input log (Parquet or CSV) or ROS bag.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Output log to write.")],
     config: Annotated[Path | None, typer.Option(help="Monitor/VFS config TOML.")] = None,
     thresholds: Annotated[Path | None, typer.Option(help="Thresholds TOML (calibrate).")] = None,
@@ -184,49 +171,77 @@ def run(
             "--method paper, ours otherwise."
         ),
     ] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(help=ROBOT_HELP + " Required when the log has no grfguard metadata."),
+    ] = None,
+    time_order: Annotated[
+        str,
+        typer.Option(
+            "--time-order",
+            help="Rows whose time does not advance: strict (error), drop (drop them) or "
+            "split (run each increasing segment on its own).",
+        ),
+    ] = "strict",
+    unit_check: Annotated[
+        bool,
+        typer.Option(
+            "--unit-check/--no-unit-check",
+            help="Refuse forces in kN/kgf, acceleration in g, angles in degrees, a sensor "
+            "on the wrong foot.",
+        ),
+    ] = True,
+    topics_map: Annotated[
+        Path | None, typer.Option("--map", help="Topics map TOML for a ROS bag input.")
+    ] = None,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
-    from grfguard.io.logio import load_log, write_log
+    from grfguard._cliutil import check_log_plausible, robot_for_log
+    from grfguard.io.anyread import read_any
+    from grfguard.io.logio import write_log
+    from grfguard.io.safe import check_output
 
-    df = load_log(log)
-    result = _run_monitor(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
+    rob = _check_run_inputs(config, thresholds, robot)
+    check_output(output, inputs=[log, config, thresholds, robot, topics_map], what="output log")
+    df = read_any(log, topics_map, time_order=time_order)
+    robot_for_log(df, rob, str(log))
+    if unit_check:
+        check_log_plausible(df, rob, str(log))
+    result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
     write_log(result, output)
-    console.print(f"wrote {output}: {len(result)} samples")
+    _say(f"wrote {output}: {len(result)} samples")
 
 
-def monitor_config(
-    config: Path | None = None,
-    thresholds: Path | None = None,
-    method: str | None = None,
-    vfs: str | None = None,
-) -> Any:
-    """The monitor configuration the command-line options describe.
+def _check_run_inputs(config: Path | None, thresholds: Path | None, robot: str | None) -> Any:
+    """Validate the config, thresholds and robot files before any work (errors name the
+    file and key); returns the ``--robot`` robot or None."""
+    from grfguard._cliutil import check_monitor_toml, check_thresholds_toml, resolve_robot
 
-    ``method="paper"`` means the paper as published: its observer and, unless ``vfs``
-    or the config file says otherwise, its virtual sensor too.
-    """
-    from grfguard.detect.monitor import MonitorConfig
-    from grfguard.detect.thresholds import default_thresholds, paper_vfs_thresholds
-    from grfguard.errors import ConfigError
-    from grfguard.estimate.config import VFSConfig
-
-    cfg = MonitorConfig.from_toml(config) if config is not None else MonitorConfig()
-    if method is not None:
-        cfg = cfg.with_method(method)
-    if vfs is None and method == "paper" and cfg.vfs is None:
-        vfs = "paper"
-    if vfs == "paper":
-        cfg = cfg.replace(vfs=VFSConfig.paper())
-        if thresholds is None and cfg.thresholds == default_thresholds():
-            # the paper's eq. 33 thresholds come from fault-free runs of its own pipeline
-            cfg = cfg.with_thresholds(paper_vfs_thresholds())
-    elif vfs == "default":
-        cfg = cfg.replace(vfs=VFSConfig())
-    elif vfs is not None:
-        raise ConfigError(f"--vfs must be 'default' or 'paper', got {vfs!r}")
+    if config is not None:
+        check_monitor_toml(config)
     if thresholds is not None:
-        cfg = cfg.with_thresholds(thresholds)
-    return cfg
+        check_thresholds_toml(thresholds)
+    return resolve_robot(robot)
+
+
+def _run_segments(df: Any, **kw: Any) -> Any:
+    """Run the monitor; a log read with ``time_order="split"`` runs segment by segment."""
+    from grfguard.io.logio import SEGMENT
+
+    if SEGMENT not in df.columns:
+        return _run_monitor(df, **kw)
+    import pandas as pd
+
+    parts = []
+    for k, part in df.groupby(SEGMENT, sort=False):
+        seg = part.drop(columns=[SEGMENT]).reset_index(drop=True)
+        seg.attrs = dict(df.attrs)
+        res = _run_monitor(seg, **kw)
+        res[SEGMENT] = k
+        parts.append(res)
+    out = pd.concat(parts, ignore_index=True)
+    out.attrs = dict(parts[0].attrs)
+    return out
 
 
 def _run_monitor(
@@ -236,9 +251,14 @@ def _run_monitor(
     method: str | None,
     vfs: str | None = None,
 ) -> Any:
+    from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
+    if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
+        from grfguard.cli_calib import corrected_log
+
+        df = corrected_log(df, thresholds)
     return Monitor.for_log(df, config=cfg).run(df)
 
 
@@ -248,59 +268,33 @@ def _run_monitor(
 def evaluate(
     log: Annotated[Path, typer.Argument(help="Output of `grfguard run`.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    robot: Annotated[
+        str | None, typer.Option(help=ROBOT_HELP + " Overrides the log's metadata.")
+    ] = None,
 ) -> None:
     """Accuracy of the virtual sensor and of detection against the truth columns."""
+    from grfguard._cliutil import resolve_robot
+    from grfguard.errors import LogFormatError
+    from grfguard.evaluate.frame import evaluate_frame
     from grfguard.io.logio import read_log
 
+    rob = resolve_robot(robot)
     df = read_log(log)
+    if rob is not None:
+        df.attrs["robot"] = rob.to_dict()
     result = evaluate_frame(df)
+    if "vfs" not in result and "detection" not in result:
+        raise LogFormatError(
+            f"{log} has no truth to evaluate against (no true_force_* or fault_* columns): "
+            "evaluate needs a simulated log (`grfguard simulate`, `grfguard inject`) run "
+            "through `grfguard run`"
+        )
     if as_json:
         from grfguard.io.logio import to_jsonable
 
         out.print_json(json.dumps(to_jsonable(result)))
     else:
         _print_evaluation(result)
-
-
-def evaluate_frame(df: Any) -> dict[str, Any]:
-    """All metrics the truth in ``df`` allows (VFS accuracy, detection)."""
-    from grfguard.errors import LogFormatError
-
-    result: dict[str, Any] = {"source": df.attrs.get("source")}
-    if "vfs_r1" not in df.columns:
-        raise LogFormatError(
-            "the log has no vfs_* columns: evaluate the output of `grfguard run`, not its input"
-        )
-    if "true_force_r1" in df.columns:
-        from grfguard.evaluate.vfs_metrics import evaluate_vfs
-
-        result["vfs"] = evaluate_vfs(df)
-    if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        result["detection"] = detection_metrics(df)
-    return result
-
-
-def detection_metrics(df: Any) -> dict[str, Any]:
-    """Per-sensor detection metrics and their summary, as plain JSON-able dicts."""
-    import math
-
-    from grfguard.evaluate.detection import evaluate_detection, summarize_detection
-
-    table = evaluate_detection(df)
-    duration = float(df["time"].iloc[-1] - df["time"].iloc[0])
-
-    def clean(v: Any) -> Any:
-        if hasattr(v, "item"):
-            v = v.item()
-        if isinstance(v, float) and math.isnan(v):
-            return None
-        return v
-
-    sensors = {
-        str(s): {k: clean(v) for k, v in row.items()} for s, row in table.iterrows()
-    }
-    summary = {k: clean(v) for k, v in summarize_detection(table, duration).items()}
-    return {"sensors": sensors, "summary": summary}
 
 
 def _fmt(v: Any) -> str:
@@ -342,16 +336,34 @@ def calibrate(
         float, typer.Option("--false-alarm-rate", help="Target false alarms per hour.")
     ] = 0.1,
     config: Annotated[Path | None, typer.Option(help="Monitor config TOML.")] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(help=ROBOT_HELP + " Required when a log has no grfguard metadata."),
+    ] = None,
+    model: Annotated[
+        bool, typer.Option("--model", help="Also fit model corrections (grfguard.calib).")
+    ] = False,
+    mass: Annotated[float | None, typer.Option(help="Measured robot mass [kg].")] = None,
 ) -> None:
     """Calibrate detection thresholds from fault-free logs for a false-alarm rate."""
-    from grfguard.detect.monitor import calibrate_monitor
+    from grfguard._cliutil import robot_for_log
+    from grfguard.detect.calibrate import calibrate_thresholds
     from grfguard.io.logio import load_log
+    from grfguard.io.safe import atomic_write_text, check_output
 
+    rob = _check_run_inputs(config, None, robot)
+    check_output(output, inputs=[*logs, config, robot], what="thresholds TOML")
     frames = [load_log(p) for p in logs]
-    th = calibrate_monitor(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(th.to_toml())
-    console.print(f"wrote {output} from {len(frames)} log(s)")
+    for p, f in zip(logs, frames, strict=True):
+        robot_for_log(f, rob, str(p))
+    corr_toml = ""
+    if model:  # model corrections first, thresholds on the corrected data (issue 10)
+        from grfguard.cli_calib import fit_model_corrections
+
+        frames, corr_toml = fit_model_corrections(frames, mass, console)
+    th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
+    atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
+    _say(f"wrote {output} from {len(frames)} log(s)")
 
 
 # ---------------------------------------------------------------------------- report
@@ -363,31 +375,42 @@ def report(
         Path | None, typer.Option("-o", "--output", help="HTML report to write.")
     ] = None,
     png: Annotated[Path | None, typer.Option("--png", help="Directory for PNG figures.")] = None,
+    robot: Annotated[
+        str | None, typer.Option(help=ROBOT_HELP + " Overrides the log's metadata.")
+    ] = None,
 ) -> None:
     """Write a standalone HTML report and/or PNG figures of a run."""
-    from grfguard.errors import ConfigError
+    from grfguard._cliutil import resolve_robot
+    from grfguard.errors import ConfigError, LogFormatError
     from grfguard.io.logio import read_log
+    from grfguard.io.safe import atomic_path, check_output, check_output_dir
 
     if output is None and png is None:
         raise ConfigError("nothing to write: give -o REPORT.html and/or --png DIR")
-    df = read_log(log)
-    metrics = _detection_metrics_or_none(df)
+    rob = resolve_robot(robot)
+    if output is not None:
+        check_output(output, inputs=[log], what="HTML report")
+    if png is not None:
+        check_output_dir(png, inputs=[log], what="figure directory", option="--png")
+    df = read_log(log)  # the report computes the metrics of `grfguard evaluate` itself
+    if rob is not None:
+        df.attrs["robot"] = rob.to_dict()
+    if not any(str(c).startswith("flag_") for c in df.columns):
+        raise LogFormatError(
+            f"{log} has no flag_* columns: it was never run; report the output of "
+            f"`grfguard run {log} -o OUT.parquet`"
+        )
     if output is not None:
         from grfguard.report.html import write_html_report
 
-        write_html_report(df, output, metrics=metrics)
-        console.print(f"wrote {output}")
+        with atomic_path(output, what="HTML report") as tmp:
+            write_html_report(df, tmp)
+        _say(f"wrote {output}")
     if png is not None:
         from grfguard.report.figures import write_png_figures
 
-        paths = write_png_figures(df, png, metrics=metrics)
-        console.print(f"wrote {len(paths)} figure(s) to {png}")
-
-
-def _detection_metrics_or_none(df: Any) -> Any:
-    if "flag_r1" in df.columns and "fault_r1" in df.columns:
-        return detection_metrics(df)["sensors"]
-    return None
+        paths = write_png_figures(df, png)
+        _say(f"wrote {len(paths)} figure(s) to {png}")
 
 
 # ------------------------------------------------------------------------------ demo
@@ -399,9 +422,36 @@ def demo(
     seed: Annotated[int, typer.Option(help="Seed.")] = 0,
 ) -> None:
     """The paper's scenario end to end: simulate, inject, run both methods, evaluate, report."""
+    from grfguard._cliutil import check_seed
     from grfguard.demo import run_demo
+    from grfguard.io.safe import check_output_dir
 
+    check_seed(seed)
+    check_output_dir(out_dir)
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
+
+
+def __getattr__(name: str) -> Any:
+    """Old import paths: ``grfguard.cli.{monitor_config, evaluate_frame, detection_metrics}``."""
+    if name == "monitor_config":
+        from grfguard.config import monitor_config
+
+        return monitor_config
+    if name in ("evaluate_frame", "detection_metrics"):
+        import grfguard.evaluate.frame as frame
+
+        return getattr(frame, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
+
+app.add_typer(robot_app, name="robot")
+app.command("decimate")(decimate_cmd)
+
+from grfguard.cli_ros import register as _register_ros  # noqa: E402
+
+_register_ros(app, _friendly)
 
 
 def main() -> None:

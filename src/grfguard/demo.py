@@ -52,8 +52,9 @@ def run_demo(
     Returns:
         The metrics of both methods.
     """
-    from grfguard.cli import evaluate_frame, monitor_config
+    from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
+    from grfguard.evaluate.frame import evaluate_frame
     from grfguard.faults import inject_faults, parse_fault_spec
     from grfguard.io.logio import to_jsonable, write_log
     from grfguard.report.figures import write_png_figures

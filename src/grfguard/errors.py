@@ -12,6 +12,8 @@ __all__ = [
     "LogFormatError",
     "FaultSpecError",
     "SimulationError",
+    "OutputError",
+    "GrfguardWarning",
 ]
 
 
@@ -33,3 +35,16 @@ class FaultSpecError(GrfguardError, ValueError):
 
 class SimulationError(GrfguardError, RuntimeError):
     """The walking simulation failed (for example the robot fell)."""
+
+
+class OutputError(GrfguardError, OSError):
+    """An output cannot be written: the path is an input, a directory, not writable, or the
+    disk filled up while writing (the previous file, if any, is left untouched)."""
+
+    def __str__(self) -> str:  # OSError would format (errno, strerror); keep the message
+        return str(self.args[0]) if self.args else ""
+
+
+class GrfguardWarning(UserWarning):
+    """Something in the input looks wrong but grfguard can go on (a time gap, a value
+    outside its physical range, a robot TOML relying on defaults, ...)."""

@@ -1,7 +1,8 @@
-"""Building blocks of detectors: gated two-sided CUSUM, robust scale, persistent flags.
+"""Building blocks of detectors: gated two-sided CUSUM, robust scale, calibration tails.
 
-Every block has a pure batch function on arrays and a small streaming object; both
-give identical numbers (tests assert it). Residuals are normalised (divided by their
+The CUSUM has a batch function on arrays (:func:`cusum`, used by the calibration) and a
+scalar step (:func:`cusum_step`, used by the 1 kHz detector); both give identical
+numbers (tests assert it). Residuals are normalised (divided by their
 noise scale) before they reach a CUSUM, so thresholds are in units of σ·samples.
 
 Two-sided CUSUM with drift allowance ``κ`` and threshold ``h`` on a normalised
@@ -27,11 +28,8 @@ from grfguard.errors import ConfigError
 __all__ = [
     "CusumResult",
     "cusum",
-    "Cusum",
     "cusum_step",
     "robust_scale",
-    "hysteresis",
-    "PersistentFlag",
     "excursion_peaks",
     "threshold_for_rate",
 ]
@@ -44,7 +42,7 @@ class CusumResult:
     Attributes:
         g_pos: Upper sum ``g⁺`` [σ].
         g_neg: Lower sum ``g⁻`` [σ].
-        alarm: True where ``max(g⁺, g⁻) > h`` (before the reset).
+        alarm: True where ``max(g⁺, g⁻) > h`` (the sums are stored after the reset).
     """
 
     g_pos: np.ndarray
@@ -80,15 +78,23 @@ def cusum(
     """
     _check_cusum(kappa, h)
     z = np.asarray(z, dtype=float)
-    det = Cusum(kappa, h, shape=z.shape[1:], reset=reset)
     m = np.ones(z.shape, bool) if mask is None else np.broadcast_to(mask, z.shape)
     gp = np.empty(z.shape)
     gn = np.empty(z.shape)
     al = np.empty(z.shape, bool)
+    g_pos = np.zeros(z.shape[1:])
+    g_neg = np.zeros(z.shape[1:])
     for i in range(z.shape[0]):
-        al[i] = det.update(z[i], m[i])
-        gp[i] = det.g_pos
-        gn[i] = det.g_neg
+        ok = m[i] & np.isfinite(z[i])
+        zz = np.where(ok, z[i], 0.0)
+        g_pos = np.where(ok, np.maximum(0.0, g_pos + zz - kappa), g_pos)
+        g_neg = np.where(ok, np.maximum(0.0, g_neg - zz - kappa), g_neg)
+        al[i] = np.maximum(g_pos, g_neg) > h
+        if reset and np.any(al[i]):
+            g_pos = np.where(al[i], 0.0, g_pos)
+            g_neg = np.where(al[i], 0.0, g_neg)
+        gp[i] = g_pos
+        gn[i] = g_neg
     return CusumResult(gp, gn, al)
 
 
@@ -107,46 +113,6 @@ def cusum_step(g_pos: float, g_neg: float, z: float, kappa: float) -> tuple[floa
     gp = g_pos + z - kappa
     gn = g_neg - z - kappa
     return (gp if gp > 0.0 else 0.0), (gn if gn > 0.0 else 0.0)
-
-
-class Cusum:
-    """Streaming gated two-sided CUSUM (see :func:`cusum`).
-
-    Args:
-        kappa: Drift allowance [σ].
-        h: Threshold [σ·samples].
-        shape: Shape of one sample (``()`` for a scalar, ``(n,)`` for n channels).
-        reset: Restart from zero after an alarm.
-    """
-
-    def __init__(
-        self, kappa: float, h: float, shape: tuple[int, ...] = (), reset: bool = True
-    ) -> None:
-        _check_cusum(kappa, h)
-        self.kappa = float(kappa)
-        self.h = float(h)
-        self.shape = tuple(shape)
-        self.reset_on_alarm = bool(reset)
-        self.reset()
-
-    def reset(self) -> None:
-        """Sums back to zero."""
-        self.g_pos = np.zeros(self.shape)
-        self.g_neg = np.zeros(self.shape)
-
-    def update(self, z: np.ndarray | float, mask: np.ndarray | bool = True) -> np.ndarray:
-        """One sample; returns the alarm (bool array of ``shape``)."""
-        z = np.asarray(z, dtype=float)
-        ok = np.asarray(mask, bool) & np.isfinite(z)
-        zz = np.where(ok, z, 0.0)
-        gp = np.where(ok, np.maximum(0.0, self.g_pos + zz - self.kappa), self.g_pos)
-        gn = np.where(ok, np.maximum(0.0, self.g_neg - zz - self.kappa), self.g_neg)
-        alarm = np.maximum(gp, gn) > self.h
-        self.g_pos, self.g_neg = gp, gn
-        if self.reset_on_alarm and np.any(alarm):
-            self.g_pos = np.where(alarm, 0.0, gp)
-            self.g_neg = np.where(alarm, 0.0, gn)
-        return alarm
 
 
 def robust_scale(x: np.ndarray, mask: np.ndarray | None = None, axis: int = 0) -> np.ndarray:
@@ -170,41 +136,6 @@ def robust_scale(x: np.ndarray, mask: np.ndarray | None = None, axis: int = 0) -
         return np.full(np.delete(np.array(x.shape), axis), np.nan) if x.ndim > 1 else np.nan
     med = np.nanmedian(x, axis=axis, keepdims=True)
     return 1.4826 * np.nanmedian(np.abs(x - med), axis=axis)
-
-
-def hysteresis(alarm: np.ndarray, n_on: int = 1, n_off: int = 1000) -> np.ndarray:
-    """Persistent flag: on after ``n_on`` consecutive alarm samples, off after ``n_off``
-    consecutive quiet samples (batch form of :class:`PersistentFlag`)."""
-    alarm = np.asarray(alarm, bool)
-    pf = PersistentFlag(n_on, n_off, shape=alarm.shape[1:])
-    out = np.empty(alarm.shape, bool)
-    for i in range(alarm.shape[0]):
-        out[i] = pf.update(alarm[i])
-    return out
-
-
-class PersistentFlag:
-    """Flag with hysteresis in samples (see :func:`hysteresis`)."""
-
-    def __init__(self, n_on: int = 1, n_off: int = 1000, shape: tuple[int, ...] = ()) -> None:
-        if int(n_on) < 1 or int(n_off) < 1:
-            raise ConfigError(f"PersistentFlag needs n_on >= 1 and n_off >= 1, got {n_on}, {n_off}")
-        self.n_on, self.n_off, self.shape = int(n_on), int(n_off), tuple(shape)
-        self.reset()
-
-    def reset(self) -> None:
-        """Flag off, counters zero."""
-        self.flag = np.zeros(self.shape, bool)
-        self._on = np.zeros(self.shape, int)
-        self._off = np.zeros(self.shape, int)
-
-    def update(self, alarm: np.ndarray | bool) -> np.ndarray:
-        """One sample; returns the flag."""
-        a = np.asarray(alarm, bool)
-        self._on = np.where(a, self._on + 1, 0)
-        self._off = np.where(a, 0, self._off + 1)
-        self.flag = np.where(self.flag, self._off < self.n_off, self._on >= self.n_on)
-        return self.flag.copy()
 
 
 def excursion_peaks(stat: np.ndarray) -> np.ndarray:

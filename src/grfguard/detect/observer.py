@@ -200,6 +200,7 @@ def run_observer(
     force_vfs_n: np.ndarray,
     config: ObserverConfig | None = None,
     full: bool = False,
+    eta0_n: np.ndarray | None = None,
 ) -> ObserverResult:
     """Run the paper's observer over a whole log (batch).
 
@@ -213,6 +214,8 @@ def run_observer(
         config: Observer parameters (paper defaults).
         full: Use the full time-varying Kalman filter from ``P_0`` instead of the
             steady-state gain.
+        eta0_n: Initial fault estimate per sensor, shape (n,) [N] (default
+            ``config.eta0_n`` for every sensor); also the low-pass's initial output.
 
     Returns:
         :class:`ObserverResult` with arrays of shape (T, n).
@@ -233,7 +236,10 @@ def run_observer(
         g = steady_state_gain(config)
         gains = np.broadcast_to(np.array([g.k_eta, g.k_n]), (t_len, 2))
     eta = np.empty((t_len, n))
-    prev = np.full(n, config.eta0_n)
+    eta0 = np.full(n, config.eta0_n) if eta0_n is None else np.asarray(eta0_n, float)
+    if eta0.shape != (n,):
+        raise ConfigError(f"run_observer: eta0_n has shape {eta0.shape}, expected ({n},)")
+    prev = eta0.copy()
     if not full and valid.all():
         k = -gains[0, 0]
         eta, _ = lfilter([k], [1.0, -(1.0 - k)], e, axis=0, zi=((1.0 - k) * prev)[None, :])
@@ -244,11 +250,11 @@ def run_observer(
             cur = np.where(valid[i], cur, prev)
             eta[i] = cur
             prev = cur
-    eta_prev = np.vstack([np.full((1, n), config.eta0_n), eta[:-1]])
+    eta_prev = np.vstack([eta0[None, :], eta[:-1]])
     innov = eta_prev - e
     force = meas - eta_prev + gains[:, 1:2] * innov
     force = np.where(valid, force, np.where(np.isfinite(meas), meas - eta_prev, vfs))
-    eta_f = lowpass(eta, config, y0=config.eta0_n)
+    eta_f = lowpass(eta, config, y0=eta0)
     return ObserverResult(
         eta_n=eta, force_n=force, eta_filtered_n=eta_f, gain_eta=np.array(gains[:, 0])
     )

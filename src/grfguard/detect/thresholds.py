@@ -2,7 +2,7 @@
 
 The shipped defaults (``default_thresholds.toml`` next to this module) were calibrated
 by ``benchmarks/calibrate_default_thresholds.py`` on fault-free simulated walks whose
-seeds are not used by the tests. :func:`grfguard.detect.monitor.calibrate_thresholds`
+seeds are not used by the tests. :func:`grfguard.detect.calibrate.calibrate_thresholds`
 makes new ones from your own fault-free logs.
 """
 

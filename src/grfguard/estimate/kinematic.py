@@ -20,36 +20,12 @@ import numpy as np
 
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINT_NAMES, SIDES, RobotConfig
+from grfguard.rotations import quat_exp, quat_mul, quat_to_matrix
 
 __all__ = [
     "rotate_frames",
     "AttitudeFilter",
     "KinematicModel", "KinematicFrames", "angular_momentum_about_com", "quat_to_matrix"]
-
-
-def quat_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrices from unit quaternions.
-
-    Args:
-        quat_wxyz: (..., 4) quaternions ``w, x, y, z`` (normalized here).
-
-    Returns:
-        (..., 3, 3) rotation matrices.
-    """
-    q = np.asarray(quat_wxyz, float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    r = np.empty(q.shape[:-1] + (3, 3))
-    r[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    r[..., 0, 1] = 2 * (x * y - w * z)
-    r[..., 0, 2] = 2 * (x * z + w * y)
-    r[..., 1, 0] = 2 * (x * y + w * z)
-    r[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    r[..., 1, 2] = 2 * (y * z - w * x)
-    r[..., 2, 0] = 2 * (x * z - w * y)
-    r[..., 2, 1] = 2 * (y * z + w * x)
-    r[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return r
 
 
 @dataclass
@@ -248,25 +224,6 @@ def angular_momentum_about_com(
     return lin + rot
 
 
-def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def _qexp(x: float, y: float, z: float) -> tuple[float, float, float, float]:
-    th = math.sqrt(x * x + y * y + z * z)
-    if th < 1e-12:
-        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
-    s = math.sin(0.5 * th) / th
-    return (math.cos(0.5 * th), s * x, s * y, s * z)
-
-
 class AttitudeFilter:
     """Complementary attitude filter: gyro integration pulled slowly toward the IMU quaternion.
 
@@ -303,10 +260,10 @@ class AttitudeFilter:
             return np.array(qm)
         dt = self.dt
         gx, gy, gz = (float(v) * dt for v in gyro_rad_s)
-        q = _qmul(self.q, _qexp(gx, gy, gz))
-        e = _qmul((q[0], -q[1], -q[2], -q[3]), qm)
+        q = quat_mul(self.q, quat_exp(gx, gy, gz))
+        e = quat_mul((q[0], -q[1], -q[2], -q[3]), qm)
         sgn = 2.0 * self.k if e[0] >= 0 else -2.0 * self.k
-        q = _qmul(q, _qexp(sgn * e[1], sgn * e[2], sgn * e[3]))
+        q = quat_mul(q, quat_exp(sgn * e[1], sgn * e[2], sgn * e[3]))
         n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
         self.q = (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
         return np.array(self.q)

@@ -31,22 +31,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from grfguard.estimate.distribute import (
-    DistributionSolver,
-    solve_distribution_batch,
-    solve_distribution_one,
-)
+from grfguard.estimate.corner_qp import solve_corner_qp
 
 __all__ = [
     "corner_contact",
     "split_qp",
-    "split_qp_one",
     "paper_alpha",
     "paper_leg_forces",
     "paper_cop_literal",
     "world_to_foot_xy",
     "split_paper_feet",
-    "split_paper_feet_one",
 ]
 
 
@@ -109,23 +103,7 @@ def split_qp(
         (T, 8) forces [N] (``NaN`` where the input was not finite).
     """
     rel = corners_xy_W - zmp_W[:, None, :]
-    d = np.zeros((rel.shape[0], 2))
-    sol = solve_distribution_batch(rel, d, total_force_n, weight, zero_mask=~contact)
-    return sol.forces
-
-
-def split_qp_one(
-    corners_xy_W: np.ndarray,
-    contact: np.ndarray,
-    zmp_W: np.ndarray,
-    total_force_n: float,
-    weight: float,
-) -> np.ndarray:
-    """One sample of :func:`split_qp` (shapes without the time axis)."""
-    rel = corners_xy_W - zmp_W[None, :]
-    return solve_distribution_one(
-        rel, np.zeros(2), np.array([total_force_n]), weight, zero_mask=~contact
-    )
+    return solve_corner_qp(rel, np.zeros((rel.shape[0], 2)), total_force_n, weight, contact)
 
 
 def paper_alpha(com_y_rel_m: np.ndarray, cy_max_m: np.ndarray | float) -> np.ndarray:
@@ -202,34 +180,7 @@ def split_paper_feet(
         (T, 8) corner forces [N].
     """
     lo, hi = points_F.min(axis=0), points_F.max(axis=0)
-    cop = np.clip(cop_F, lo, hi)
-    out = []
-    for i in range(2):
-        fz = foot_force_n[:, i]
-        d = np.maximum(fz, 0.0)[:, None] * cop[:, i]
-        out.append(solve_distribution_batch(points_F, d, fz, weight).forces)
-    return np.concatenate(out, axis=1)
-
-
-def split_paper_feet_one(
-    cop_F: np.ndarray, foot_force_n: np.ndarray, points_F: np.ndarray, solver: DistributionSolver
-) -> np.ndarray:
-    """One sample of :func:`split_paper_feet` with a cached per-foot solver.
-
-    Args:
-        cop_F: (2, 2) CoP of (right, left) in each sole frame [m].
-        foot_force_n: (2,) vertical force of each foot [N].
-        points_F: (4, 2) sensor positions in the sole frame [m].
-        solver: ``DistributionSolver(points_F, weight)``.
-
-    Returns:
-        (8,) corner forces [N].
-    """
-    lo, hi = points_F.min(axis=0), points_F.max(axis=0)
-    cop = np.clip(cop_F, lo, hi)
-    out = np.empty(8)
-    for i in range(2):
-        fz = float(foot_force_n[i])
-        fp = max(fz, 0.0)
-        out[4 * i : 4 * i + 4] = solver.solve(fp * float(cop[i, 0]), fp * float(cop[i, 1]), fz)
-    return out
+    cop = np.clip(cop_F, lo, hi).reshape(-1, 2)  # (2T, 2): right, left of each sample
+    fz = np.asarray(foot_force_n, float).reshape(-1)
+    forces = solve_corner_qp(points_F, np.maximum(fz, 0.0)[:, None] * cop, fz, weight)
+    return forces.reshape(-1, 8)

@@ -49,13 +49,11 @@ from grfguard.estimate.compliance import (
     split_with_prior,
 )
 from grfguard.estimate.config import VFSConfig
-from grfguard.estimate.distribute import DistributionSolver
 from grfguard.estimate.kinematic import (
     AttitudeFilter,
     KinematicFrames,
     KinematicModel,
     angular_momentum_about_com,
-    quat_to_matrix,
     rotate_frames,
 )
 from grfguard.estimate.legs import (
@@ -64,9 +62,7 @@ from grfguard.estimate.legs import (
     paper_cop_literal,
     paper_leg_forces,
     split_paper_feet,
-    split_paper_feet_one,
     split_qp,
-    split_qp_one,
     world_to_foot_xy,
 )
 from grfguard.io.schema import (
@@ -82,6 +78,7 @@ from grfguard.io.schema import (
     vfs_col,
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
+from grfguard.rotations import quat_to_matrix
 
 __all__ = ["VFSConfig", "VirtualForceSensor", "VFS_OUTPUT_COLUMNS", "with_vfs_columns"]
 
@@ -211,7 +208,6 @@ class VirtualForceSensor:
         self._prev_frames: KinematicFrames | None = None
         self._prev_L: np.ndarray | None = None
         self._paper: PaperCoMFilter | None = None
-        self._foot_solver: DistributionSolver | None = None
         self._zkf = ZMPKalmanFilter(c.dt, c.zmp_rate_psd, c.com_acc_psd, c.com_sigma)
         self._p_act_prev: np.ndarray | None = None
         self._last: dict[str, float] | None = None
@@ -414,16 +410,18 @@ class VirtualForceSensor:
                 prior = compliance_prior(p_WK[:, 2], contact, fz, self.contact_stiffness)
                 forces = solve_with_prior(p_WK[:, :2] - zmp, prior, fz, c.qp_weight, contact)
             else:
-                forces = split_qp_one(p_WK[:, :2], contact, zmp, float(force[2]), c.qp_weight)
+                forces = split_qp(
+                    p_WK[None, :, :2], contact[None], zmp[None], force[2:3], c.qp_weight
+                )[0]
             feet = contact.reshape(2, 4).any(axis=1)
             return forces, feet
         forces = self._split_paper(
             fr.p_AS[None] + p_WT[None, None, :], fr.R_WS[None], com[None], force[None],
-            st[None], stream=True,
+            st[None],
         )[0]
         return forces, np.asarray(st, bool)
 
-    def _split_paper(self, p_WS, R_WS, com, force, st, stream: bool = False) -> np.ndarray:
+    def _split_paper(self, p_WS, R_WS, com, force, st) -> np.ndarray:
         """Paper split for (T, ...) arrays."""
         c = self.config
         mid = p_WS.mean(axis=1)  # (T, 3)
@@ -440,11 +438,6 @@ class VirtualForceSensor:
         f = p_WS - com[:, None, :]
         cop_W = paper_cop_literal(f, legs)
         cop_F = world_to_foot_xy(cop_W, R_WS)
-        if stream:
-            if self._foot_solver is None:
-                self._foot_solver = DistributionSolver(self.points_F, c.qp_weight)
-            return split_paper_feet_one(cop_F[0], legs[0, :, 2], self.points_F,
-                                        self._foot_solver)[None]
         return split_paper_feet(cop_F, legs[..., 2], self.points_F, c.qp_weight)
 
     # ------------------------------------------------------------------ batch

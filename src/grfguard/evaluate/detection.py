@@ -1,5 +1,9 @@
 """Detection metrics: alarms matched to the injected truth windows (STYLE.md item 7).
 
+The one definition of every detection metric: ``grfguard evaluate``, the demo, the
+benchmarks and the report (:func:`grfguard.report.summary.sensor_summary`) all read them
+from here.
+
 For each sensor ``s`` the truth window is where ``fault_kind_<s> != "none"`` (from
 :func:`grfguard.faults.inject_faults`), the alarms are the rising edges of
 ``flag_<s>`` (from a detector). Metrics, NaN where undefined:
@@ -12,8 +16,11 @@ For each sensor ``s`` the truth window is where ``fault_kind_<s> != "none"`` (fr
 - ``kind_estimated`` / ``kind_correct``: the estimated kind at the last flagged sample of
   the window vs the injected kind;
 - ``recovery_rmse_n``: RMSE of ``recovered_<s> - true_force_<s>`` in stance (planned contact
-  of the foot, or true foot load when no plan) after detection [N];
-- ``fault_size_error_n``: RMSE of ``eta_<s> - fault_<s>`` after detection [N].
+  of the foot, or true foot load when no plan) after detection [N]; ``raw_rmse_n``: the
+  same for the unrecovered reading ``force_<s>``;
+- ``fault_size_error_n``: RMSE of ``eta_<s> - fault_<s>`` after detection [N];
+- ``true_size_n`` / ``estimated_size_n``: mean of ``fault_<s>`` / ``eta_<s>`` over the last
+  second of the window [N] (what the report shows as the fault size).
 """
 
 from __future__ import annotations
@@ -28,13 +35,25 @@ from grfguard.io.schema import (
     fault_col,
     fault_kind_col,
     flag_col,
+    force_col,
     kind_col,
     recovered_col,
     true_force_col,
 )
 from grfguard.model.robot import SENSOR_NAMES
 
-__all__ = ["evaluate_detection", "truth_windows", "flag_episodes", "summarize_detection"]
+__all__ = [
+    "evaluate_detection",
+    "sensor_detection",
+    "truth_windows",
+    "flag_episodes",
+    "summarize_detection",
+]
+
+#: Foot load above which a foot counts as in stance when the log has no plan [N].
+_STANCE_LOAD_N = 20.0
+#: Length of the end of a fault window over which its size is averaged [s].
+_SIZE_WINDOW_S = 1.0
 
 
 def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -65,6 +84,107 @@ def flag_episodes(time_s: np.ndarray, flag: np.ndarray) -> list[tuple[float, flo
     return [(float(t[a]), float(t[b - 1]) + dt) for a, b in _segments(flag)]
 
 
+def _stance(log: pd.DataFrame, side: str) -> np.ndarray | None:
+    """Planned stance of a foot, or its true load above 20 N; None if neither is known."""
+    if f"contact_ref_{side}" in log.columns:
+        return log[f"contact_ref_{side}"].to_numpy(dtype=float) > 0.5
+    cols = [true_force_col(f"{side}{k}") for k in range(1, 5)]
+    if not all(c in log.columns for c in cols):
+        return None
+    return sum(log[c].to_numpy(dtype=float) for c in cols) > _STANCE_LOAD_N
+
+
+def _rmse_between(a: pd.Series, b: pd.Series, mask: np.ndarray, finite: bool) -> float:
+    """RMSE of ``a - b`` over ``mask`` [N] (``finite``: ignore non-finite differences)."""
+    d = a.to_numpy(dtype=float)[mask] - b.to_numpy(dtype=float)[mask]
+    if finite:
+        d = d[np.isfinite(d)]
+        return float(np.sqrt(np.mean(d**2))) if d.size else np.nan
+    return float(np.sqrt(np.nanmean(d**2))) if d.size else np.nan
+
+
+def _empty_row(sensor: str, wins: list[tuple[float, float, str]]) -> dict[str, object]:
+    return {
+        "sensor": sensor,
+        "faulty": bool(wins),
+        "fault_kind": wins[0][2] if wins else "none",
+        "onset_s": wins[0][0] if wins else np.nan,
+        "detected": np.nan,
+        "delay_s": np.nan,
+        "false_alarms": 0,
+        "false_alarm_time_s": 0.0,
+        "kind_estimated": "none",
+        "kind_correct": np.nan,
+        "recovery_rmse_n": np.nan,
+        "fault_size_error_n": np.nan,
+        "raw_rmse_n": np.nan,
+        "true_size_n": np.nan,
+        "estimated_size_n": np.nan,
+    }
+
+
+def _after_detection(
+    row: dict[str, object], log: pd.DataFrame, out: pd.DataFrame, s: str,
+    t: np.ndarray, i_det: int, end_s: float,
+) -> None:
+    """Recovery and fault-size errors from detection to the end of the window."""
+    after = (t >= t[i_det]) & (t < end_s)
+    truth = true_force_col(s)
+    stance = _stance(log, s[0]) if truth in log.columns else None
+    if stance is not None and (after & stance).any():
+        m = after & stance
+        if recovered_col(s) in out.columns:
+            row["recovery_rmse_n"] = _rmse_between(out[recovered_col(s)], log[truth], m, False)
+        if force_col(s) in log.columns:
+            row["raw_rmse_n"] = _rmse_between(log[force_col(s)], log[truth], m, False)
+    if eta_col(s) in out.columns and fault_col(s) in log.columns:
+        row["fault_size_error_n"] = _rmse_between(out[eta_col(s)], log[fault_col(s)], after, True)
+
+
+def sensor_detection(
+    log: pd.DataFrame, output: pd.DataFrame, sensor: str, tolerance_s: float = 1.0
+) -> dict[str, object]:
+    """The metrics of one sensor (a row of :func:`evaluate_detection`).
+
+    A missing ``flag_<s>`` column counts as a flag that never rose; other missing
+    columns leave their metrics NaN.
+    """
+    s, out = sensor, output
+    t = log[TIME].to_numpy(dtype=float)
+    flag = (
+        out[flag_col(s)].to_numpy(dtype=bool) if flag_col(s) in out.columns
+        else np.zeros(len(t), bool)
+    )
+    wins = truth_windows(log, s)
+    row = _empty_row(s, wins)
+    in_win_tol = np.zeros(len(t), bool)
+    for a, b, _ in wins:
+        in_win_tol |= (t >= a) & (t < b + tolerance_s)
+    fa = [(a, b) for a, b in flag_episodes(t, flag) if not np.any(in_win_tol[(t >= a) & (t < b)])]
+    row["false_alarms"] = len(fa)
+    row["false_alarm_time_s"] = float(sum(b - a for a, b in fa))
+    if not wins:
+        return row
+    a0, b0, kind0 = wins[0]
+    last = (t >= b0 - _SIZE_WINDOW_S) & (t < b0)
+    if fault_col(s) in log.columns:
+        row["true_size_n"] = float(np.nanmean(log[fault_col(s)].to_numpy(dtype=float)[last]))
+    if eta_col(s) in out.columns:
+        row["estimated_size_n"] = float(np.nanmean(out[eta_col(s)].to_numpy(dtype=float)[last]))
+    sel = (t >= a0) & (t < b0 + tolerance_s) & flag
+    row["detected"] = bool(sel.any())
+    if not row["detected"]:
+        return row
+    i_det = int(np.flatnonzero(sel)[0])
+    row["delay_s"] = float(t[i_det] - a0)
+    in_w_flag = np.flatnonzero((t >= a0) & (t < b0) & flag)
+    if kind_col(s) in out.columns and in_w_flag.size:
+        row["kind_estimated"] = str(out[kind_col(s)].iloc[in_w_flag[-1]])
+        row["kind_correct"] = row["kind_estimated"] == kind0
+    _after_detection(row, log, out, s, t, i_det, b0)
+    return row
+
+
 def evaluate_detection(
     log: pd.DataFrame,
     output: pd.DataFrame | None = None,
@@ -83,7 +203,7 @@ def evaluate_detection(
         sensors: Sensors to evaluate.
 
     Returns:
-        One row per sensor (index ``sensor``).
+        One row per sensor (index ``sensor``), see :func:`sensor_detection`.
 
     Raises:
         LogFormatError: If ``time`` or a ``flag_<s>`` column is missing.
@@ -96,73 +216,10 @@ def evaluate_detection(
             f"evaluate_detection: output has {len(out)} rows, the log {len(log)}; "
             "pass the detector output of this very log"
         )
-    t = log[TIME].to_numpy(dtype=float)
-    rows = []
     for s in sensors:
         if flag_col(s) not in out.columns:
             raise LogFormatError(f"evaluate_detection: output lacks column {flag_col(s)!r}")
-        flag = out[flag_col(s)].to_numpy(dtype=bool)
-        wins = truth_windows(log, s)
-        in_win = np.zeros(len(t), bool)
-        in_win_tol = np.zeros(len(t), bool)
-        for a, b, _ in wins:
-            in_win |= (t >= a) & (t < b)
-            in_win_tol |= (t >= a) & (t < b + tolerance_s)
-        eps = flag_episodes(t, flag)
-        fa = [(a, b) for a, b in eps if not np.any(in_win_tol[(t >= a) & (t < b)])]
-        row: dict[str, object] = {
-            "sensor": s,
-            "faulty": bool(wins),
-            "fault_kind": wins[0][2] if wins else "none",
-            "onset_s": wins[0][0] if wins else np.nan,
-            "detected": np.nan,
-            "delay_s": np.nan,
-            "false_alarms": len(fa),
-            "false_alarm_time_s": float(sum(b - a for a, b in fa)),
-            "kind_estimated": "none",
-            "kind_correct": np.nan,
-            "recovery_rmse_n": np.nan,
-            "fault_size_error_n": np.nan,
-        }
-        if wins:
-            a0, b0, kind0 = wins[0]
-            sel = (t >= a0) & (t < b0 + tolerance_s) & flag
-            detected = bool(sel.any())
-            row["detected"] = detected
-            if detected:
-                i_det = int(np.flatnonzero(sel)[0])
-                row["delay_s"] = float(t[i_det] - a0)
-                in_w_flag = np.flatnonzero((t >= a0) & (t < b0) & flag)
-                if kind_col(s) in out.columns and in_w_flag.size:
-                    k_est = str(out[kind_col(s)].iloc[in_w_flag[-1]])
-                    row["kind_estimated"] = k_est
-                    row["kind_correct"] = k_est == kind0
-                after = (t >= t[i_det]) & (t < b0)
-                if recovered_col(s) in out.columns and true_force_col(s) in log.columns:
-                    side = s[0]
-                    if f"contact_ref_{side}" in log.columns:
-                        stance = log[f"contact_ref_{side}"].to_numpy(dtype=float) > 0.5
-                    else:
-                        tot = sum(
-                            log[true_force_col(f"{side}{k}")].to_numpy(dtype=float)
-                            for k in range(1, 5)
-                        )
-                        stance = tot > 20.0
-                    m = after & stance
-                    if m.any():
-                        err = out[recovered_col(s)].to_numpy(dtype=float)[m] - log[
-                            true_force_col(s)
-                        ].to_numpy(dtype=float)[m]
-                        row["recovery_rmse_n"] = float(np.sqrt(np.nanmean(err**2)))
-                if eta_col(s) in out.columns and fault_col(s) in log.columns:
-                    d = (
-                        out[eta_col(s)].to_numpy(dtype=float)[after]
-                        - log[fault_col(s)].to_numpy(dtype=float)[after]
-                    )
-                    d = d[np.isfinite(d)]
-                    if d.size:
-                        row["fault_size_error_n"] = float(np.sqrt(np.mean(d**2)))
-        rows.append(row)
+    rows = [sensor_detection(log, out, s, tolerance_s) for s in sensors]
     return pd.DataFrame(rows).set_index("sensor")
 
 

@@ -9,7 +9,9 @@ A log is a :class:`pandas.DataFrame` with one row per sample (the contract in
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
+import warnings
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -17,14 +19,27 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from grfguard.errors import LogFormatError
+from grfguard.errors import GrfguardWarning, LogFormatError
+from grfguard.io.safe import atomic_open, atomic_path
 from grfguard.io.schema import REQUIRED_INPUT_COLUMNS, TIME
 
-__all__ = ["read_log", "write_log", "load_log", "validate_log", "to_jsonable", "METADATA_KEY"]
+__all__ = [
+    "read_log",
+    "write_log",
+    "load_log",
+    "validate_log",
+    "find_time_gaps",
+    "to_jsonable",
+    "METADATA_KEY",
+    "SEGMENT",
+    "TIME_ORDERS",
+]
 
 #: Parquet schema metadata key holding the JSON metadata.
 METADATA_KEY = b"grfguard"
 _CSV_PREFIX = "# grfguard:"
+#: Key of the row count in a CSV's metadata line (removed on read).
+_CSV_ROWS_KEY = "_rows"
 
 
 def to_jsonable(value: Any) -> Any:
@@ -46,7 +61,11 @@ def to_jsonable(value: Any) -> Any:
 
 
 def write_log(df: pd.DataFrame, path: str | Path) -> Path:
-    """Write ``df`` (with ``df.attrs`` as metadata) to ``path``.
+    """Write ``df`` (with ``df.attrs`` as metadata) to ``path``, atomically.
+
+    The file is written next to ``path`` under a temporary name, flushed to disk and then
+    renamed: an existing ``path`` is either replaced by the complete new log or left
+    untouched (disk full, file-size limit, any error), never truncated.
 
     Args:
         df: The log.
@@ -54,18 +73,23 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
 
     Returns:
         The path written.
+
+    Raises:
+        OutputError: ``path`` is a directory or could not be written (nothing is changed).
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    meta = json.dumps(to_jsonable(dict(df.attrs)), sort_keys=True)
+    meta_dict = to_jsonable(dict(df.attrs))
     if path.suffix.lower() == ".csv":
-        with path.open("w", newline="") as fh:
+        # the row count lets read_log notice a file cut at a line boundary
+        meta = json.dumps({**meta_dict, _CSV_ROWS_KEY: len(df)}, sort_keys=True)
+        with atomic_open(path, "w", what="log", newline="", encoding="utf-8") as fh:
             fh.write(f"{_CSV_PREFIX} {meta}\n")
             df.to_csv(fh, index=False, float_format="%.17g")
         return path
+    meta = json.dumps(meta_dict, sort_keys=True)
     plain = df.copy(deep=False)
     plain.attrs = {}  # metadata goes in our own key below, not through pandas
     table = pa.Table.from_pandas(plain, preserve_index=False)
@@ -73,79 +97,320 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
     schema_meta.pop(b"pandas", None)  # attrs live in our own key, not pandas' blob
     schema_meta[METADATA_KEY] = meta.encode()
     table = table.replace_schema_metadata(schema_meta)
-    tmp = path.with_name(path.name + ".tmp")
-    pq.write_table(table, tmp, compression="zstd")
-    tmp.replace(path)  # never leave a half-written log behind
+    with atomic_path(path, what="log") as tmp:
+        try:
+            pq.write_table(table, tmp, compression="zstd")
+        except pa.ArrowException as exc:  # pragma: no cover - pyarrow wraps some OS errors
+            raise OSError(errno.EIO, str(exc)) from None
     return path
+
+
+#: Policies for timestamps that do not increase (see :func:`read_log`).
+TIME_ORDERS = ("strict", "drop", "split")
 
 
 def read_log(
     path: str | Path,
     required: Iterable[str] | None = None,
     columns: Iterable[str] | None = None,
+    time_order: str = "strict",
+    gap_s: float | None = None,
 ) -> pd.DataFrame:
     """Read a Parquet or CSV log and validate it.
+
+    Timestamps are checked on load. Rows whose time does not increase (duplicated,
+    constant or backwards time) are an error by default naming the row; ``time_order``
+    chooses otherwise:
+
+    * ``"strict"``: raise :class:`LogFormatError` (default);
+    * ``"drop"``: drop every row whose time is not after all earlier rows (warning with
+      the rows dropped);
+    * ``"split"``: keep every row and add an integer ``segment`` column that starts a new
+      segment at each such row; time increases within each segment (``grfguard run
+      --time-order split`` runs each segment on its own).
+
+    Gaps (a step longer than ``gap_s``, by default ``max(5 x median step, 20 ms)``) are
+    kept; each one gives a :class:`~grfguard.errors.GrfguardWarning` naming its row and
+    times, and the list ``[row, t_before, t_after]`` is stored in ``df.attrs["time_gaps"]``.
 
     Args:
         path: A ``.parquet`` or ``.csv`` file.
         required: Columns that must be present (default: only ``time``).
         columns: Read only these columns (Parquet only; ``time`` is always read).
+        time_order: ``strict``, ``drop`` or ``split`` (see above).
+        gap_s: Smallest time step reported as a gap [s] (default: see above).
 
     Returns:
         The log, metadata in ``.attrs``.
 
     Raises:
-        LogFormatError: The file is missing, unreadable or does not follow the contract.
+        LogFormatError: The file is missing, unreadable, truncated, or does not follow the
+            contract.
     """
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
     path = Path(path)
+    if time_order not in TIME_ORDERS:
+        raise LogFormatError(
+            f"time_order must be one of {list(TIME_ORDERS)}, got {time_order!r}"
+        )
     if not path.exists():
         raise LogFormatError(f"log file {path} does not exist")
+    if not path.is_file():
+        raise LogFormatError(f"log file {path} is not a regular file (a directory?); give a "
+                             ".parquet or .csv log")
     if path.suffix.lower() == ".csv":
         df, meta = _read_csv(path)
     else:
-        try:
-            cols = None if columns is None else list(dict.fromkeys([TIME, *columns]))
-            table = pq.read_table(path, columns=cols)
-        except (pa.ArrowInvalid, OSError) as exc:
-            raise LogFormatError(
-                f"{path} is not a readable Parquet file ({exc}); re-create it with "
-                "`grfguard simulate` or convert your data to the log contract"
-            ) from exc
-        except KeyError as exc:
-            raise LogFormatError(f"{path}: requested column {exc} is not in the file") from exc
-        raw = (table.schema.metadata or {}).get(METADATA_KEY)
-        try:
-            meta = json.loads(raw) if raw else {}
-        except json.JSONDecodeError as exc:
-            raise LogFormatError(
-                f"{path}: the grfguard metadata is not valid JSON ({exc})"
-            ) from exc
-        df = table.to_pandas()
+        df, meta = _read_parquet(path, columns)
+    _check_metadata(meta, path)
     df.attrs.update(meta)
     df.attrs.setdefault("source", str(path))
+    if TIME in df.columns and time_order != "strict" and len(df):
+        df = _repair_time(df, time_order, str(path))
     validate_log(df, required=required, where=str(path))
+    gaps = find_time_gaps(df, gap_s)
+    if gaps:
+        df.attrs["time_gaps"] = gaps
+        _warn_gaps(gaps, str(path))
     return df
 
 
-def _read_csv(path: Path) -> tuple[pd.DataFrame, dict[str, Any]]:
-    meta: dict[str, Any] = {}
-    with path.open() as fh:
-        first = fh.readline()
+def _read_parquet(path: Path, columns: Iterable[str] | None) -> tuple[pd.DataFrame, Any]:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        cols = None if columns is None else list(dict.fromkeys([TIME, *columns]))
+        table = pq.read_table(path, columns=cols)
+        raw = (table.schema.metadata or {}).get(METADATA_KEY)
+        df = table.to_pandas()
+    except KeyError as exc:
+        raise LogFormatError(f"{path}: requested column {exc} is not in the file") from None
+    except (pa.ArrowException, OSError, ValueError, TypeError, IndexError) as exc:
+        raise LogFormatError(
+            f"{path} is not a readable Parquet file ({_short(exc)}); it may be truncated or "
+            "not Parquet: re-create it, or convert your data to the log contract "
+            "(a .csv file is read as CSV)"
+        ) from None
+    try:
+        meta = json.loads(raw) if raw else {}
+    except ValueError as exc:
+        raise LogFormatError(
+            f"{path}: the grfguard metadata (Parquet key 'grfguard') is not valid JSON "
+            f"({_short(exc)}); rewrite the file with grfguard.io.logio.write_log"
+        ) from None
+    return df, meta
+
+
+def _short(exc: BaseException, n: int = 160) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
+def _check_metadata(meta: Any, path: Path) -> None:
+    """The metadata must be a JSON object; a ``robot`` entry must describe a valid robot."""
+    if not isinstance(meta, dict):
+        raise LogFormatError(
+            f"{path}: the grfguard metadata must be a JSON object {{...}}, got "
+            f"{type(meta).__name__} {_short(repr(meta), 60)}; fix or remove the metadata "
+            "(the first '# grfguard:' line of a CSV, the 'grfguard' key of a Parquet file)"
+        )
+    robot = meta.get("robot")
+    if robot is None or isinstance(robot, str):
+        return
+    if not isinstance(robot, dict):
+        raise LogFormatError(
+            f"{path}: metadata key 'robot' must be a JSON object with the robot "
+            f"parameters, got {type(robot).__name__} {_short(repr(robot), 60)}; remove it "
+            "and pass the robot with --robot ROBOT.toml"
+        )
+    from grfguard.errors import ConfigError
+    from grfguard.model.robot import RobotConfig
+
+    try:
+        RobotConfig.from_dict(dict(robot))
+    except (ConfigError, TypeError) as exc:
+        raise LogFormatError(
+            f"{path}: metadata key 'robot' is not a valid robot description ({exc}); "
+            "remove it and pass the robot with --robot ROBOT.toml"
+        ) from None
+
+
+def _read_csv(path: Path) -> tuple[pd.DataFrame, Any]:
+    meta: Any = {}
+    try:
+        with path.open("rb") as fh:
+            first = fh.readline().decode("utf-8")
+    except UnicodeDecodeError:
+        raise LogFormatError(
+            f"{path} is not a text CSV file (line 1 is not UTF-8); is it a Parquet file "
+            "with a .csv name? Rename it to .parquet, or export the data as CSV"
+        ) from None
     skip = 0
     if first.startswith(_CSV_PREFIX):
         skip = 1
         try:
             meta = json.loads(first[len(_CSV_PREFIX) :])
-        except json.JSONDecodeError as exc:
-            raise LogFormatError(f"{path}: line 1 metadata is not valid JSON ({exc})") from exc
+        except ValueError as exc:
+            raise LogFormatError(
+                f"{path}: line 1 metadata is not valid JSON ({_short(exc)}); fix the "
+                "'# grfguard: {...}' line or delete it"
+            ) from None
     try:
-        df = pd.read_csv(path, skiprows=skip)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise LogFormatError(f"{path} is not a readable CSV log ({exc})") from exc
+        df = pd.read_csv(path, skiprows=skip, encoding="utf-8")
+    except pd.errors.EmptyDataError:
+        raise LogFormatError(f"{path} has no CSV header or data") from None
+    except (ValueError, UnicodeDecodeError, OverflowError, IndexError, TypeError) as exc:
+        raise LogFormatError(f"{path} is not a readable CSV log ({_short(exc)})") from None
+    rows = meta.pop(_CSV_ROWS_KEY, None) if isinstance(meta, dict) else None
+    _check_csv_complete(path, df, rows, written_by_us=skip == 1)
     return df, meta
+
+
+def _check_csv_complete(path: Path, df: pd.DataFrame, rows: Any, written_by_us: bool) -> None:
+    """Refuse a CSV that was cut: a last line with fewer fields than the header, a missing
+    final newline in a grfguard CSV, or fewer rows than its metadata says."""
+    fix = "the file looks truncated (an interrupted copy or a full disk?); re-export it"
+    ncols = len(df.columns)
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        fh.seek(max(0, size - 65536))
+        tail = fh.read()
+    if not tail:
+        return
+    ends_with_newline = tail.endswith((b"\n", b"\r"))
+    lines = tail.rstrip(b"\r\n").splitlines()
+    last = lines[-1] if lines else b""
+    if len(df) and ncols > 1:
+        import csv
+
+        try:
+            fields = next(csv.reader([last.decode("utf-8", "replace")]))
+        except (csv.Error, StopIteration):
+            fields = []
+        if len(fields) < ncols:
+            raise LogFormatError(
+                f"{path}: the last row (row {len(df) - 1}) has {len(fields)} of {ncols} "
+                f"fields; {fix}"
+            )
+    if ncols > 1:
+        _check_csv_field_counts(path, ncols, len(df), skip=1 if written_by_us else 0, fix=fix)
+    if written_by_us and not ends_with_newline:
+        raise LogFormatError(f"{path}: the last row (row {len(df) - 1}) is cut short; {fix}")
+    if isinstance(rows, int) and not isinstance(rows, bool) and rows != len(df):
+        raise LogFormatError(
+            f"{path}: has {len(df)} rows but its metadata says {rows}; {fix}"
+        )
+
+
+def _check_csv_field_counts(path: Path, ncols: int, nrows: int, skip: int, fix: str) -> None:
+    """Every row must have as many fields as the header (pandas pads a short row with NaN).
+
+    Counts the separators of the whole file in large chunks; only when the count is off
+    does it look for the first bad row. Files with quoted fields are left to pandas."""
+    commas = 0
+    quoted = False
+    with path.open("rb") as fh:
+        for _ in range(skip):
+            fh.readline()
+        for chunk in iter(lambda: fh.read(1 << 24), b""):
+            commas += chunk.count(b",")
+            quoted = quoted or b'"' in chunk
+    if quoted or commas == (ncols - 1) * (nrows + 1):
+        return
+    with path.open("rb") as fh:
+        for _ in range(skip + 1):
+            fh.readline()
+        row = 0
+        for line in fh:
+            if not line.strip():
+                continue
+            n = line.count(b",") + 1
+            if n != ncols:
+                raise LogFormatError(
+                    f"{path}: row {row} (line {row + skip + 2}) has {n} of {ncols} fields; "
+                    f"{fix if row == nrows - 1 else 'the file is damaged; re-export it'}"
+                )
+            row += 1
+
+
+def _repair_time(df: pd.DataFrame, time_order: str, where: str) -> pd.DataFrame:
+    t = pd.to_numeric(df[TIME], errors="coerce").to_numpy(dtype=float)
+    if not np.isfinite(t).all():
+        return df  # validate_log names the row
+    if time_order == "drop":
+        running = np.maximum.accumulate(t)
+        keep = np.ones(len(t), dtype=bool)
+        keep[1:] = t[1:] > running[:-1]
+        if keep.all():
+            return df
+        dropped = np.flatnonzero(~keep)
+        attrs = dict(df.attrs)
+        out = df.loc[keep].reset_index(drop=True)
+        out.attrs = attrs
+        out.attrs["time_dropped_rows"] = [int(i) for i in dropped[:100]]
+        warnings.warn(
+            f"{where}: dropped {dropped.size} row(s) whose time does not advance, first at "
+            f"row {int(dropped[0])} (t = {t[dropped[0]]:.6g} s)",
+            GrfguardWarning,
+            stacklevel=3,
+        )
+        return out
+    seg = np.zeros(len(t), dtype=np.int64)
+    seg[1:] = np.cumsum(np.diff(t) <= 0)
+    if seg[-1] == 0:
+        return df
+    attrs = dict(df.attrs)
+    out = df.copy()
+    out[SEGMENT] = seg
+    out.attrs = attrs
+    starts = np.flatnonzero(np.diff(seg)) + 1
+    warnings.warn(
+        f"{where}: time does not advance at {starts.size} row(s), first at row "
+        f"{int(starts[0])} (t = {t[starts[0] - 1]:.6g} s -> {t[starts[0]]:.6g} s); split into "
+        f"{int(seg[-1]) + 1} segments (column 'segment')",
+        GrfguardWarning,
+        stacklevel=3,
+    )
+    return out
+
+
+#: Optional column numbering the time segments of a log read with ``time_order="split"``.
+SEGMENT = "segment"
+#: A gap is a time step longer than this many median steps (and than :data:`MIN_GAP_S`).
+GAP_FACTOR = 5.0
+#: Smallest time step reported as a gap by default [s].
+MIN_GAP_S = 0.02
+
+
+def find_time_gaps(df: pd.DataFrame, gap_s: float | None = None) -> list[list[float]]:
+    """Gaps in ``df["time"]``: ``[row, t_before, t_after]`` for every step longer than
+    ``gap_s`` [s] (default ``max(GAP_FACTOR x median step, MIN_GAP_S)``); ``row`` is the
+    first row after the gap. Steps across ``segment`` boundaries are not gaps."""
+    if TIME not in df.columns or len(df) < 3:
+        return []
+    t = df[TIME].to_numpy(dtype=float)
+    dt = np.diff(t)
+    if SEGMENT in df.columns:
+        dt = np.where(np.diff(df[SEGMENT].to_numpy()) != 0, 0.0, dt)
+    pos = dt[dt > 0]
+    if pos.size == 0:
+        return []
+    limit = gap_s if gap_s is not None else max(GAP_FACTOR * float(np.median(pos)), MIN_GAP_S)
+    idx = np.flatnonzero(dt > limit)
+    return [[int(i) + 1, float(t[i]), float(t[i + 1])] for i in idx]
+
+
+def _warn_gaps(gaps: list[list[float]], where: str) -> None:
+    shown = ", ".join(
+        f"{b - a:.3g} s at row {int(r)} (t = {a:.6g} s -> {b:.6g} s)" for r, a, b in gaps[:3]
+    )
+    more = f" and {len(gaps) - 3} more" if len(gaps) > 3 else ""
+    warnings.warn(
+        f"{where}: {len(gaps)} time gap(s) in column 'time': {shown}{more}; samples are "
+        "missing there (the monitor restarts what needs continuity)",
+        GrfguardWarning,
+        stacklevel=3,
+    )
 
 
 def validate_log(
@@ -153,9 +418,10 @@ def validate_log(
 ) -> None:
     """Check ``df`` against the contract; raise :class:`LogFormatError` saying what to fix.
 
-    Checks: the ``time`` column exists, is numeric, finite and strictly increasing; every
-    ``required`` column is present and numeric. NaN in sensor columns is allowed (it is
-    data: a dropout) and handled by the monitor.
+    Checks: the ``time`` column exists, is numeric, finite and strictly increasing (within
+    each ``segment`` when that column exists); every ``required`` column is present and
+    numeric. NaN in sensor columns is allowed (it is data: a dropout) and handled by the
+    monitor.
     """
     if TIME not in df.columns:
         raise LogFormatError(
@@ -172,6 +438,7 @@ def validate_log(
         if not pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c]):
             raise LogFormatError(
                 f"{where}: column {c!r} must be numeric, found dtype {df[c].dtype}"
+                + _first_non_number(df[c])
             )
     t = df[TIME].to_numpy(dtype=float)
     if len(t) == 0:
@@ -183,20 +450,41 @@ def validate_log(
             "drop or repair that row"
         )
     dt = np.diff(t)
+    if SEGMENT in df.columns:
+        dt = np.where(np.diff(df[SEGMENT].to_numpy(dtype=float)) != 0, 1.0, dt)
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = int(bad[0]) + 1
+        what = "goes backwards" if t[i] < t[i - 1] else "does not advance (repeated value)"
+        n_const = 1
+        while i + n_const < len(t) and t[i + n_const] == t[i - 1]:
+            n_const += 1
+        extra = f" for {n_const} rows" if n_const > 1 and t[i] == t[i - 1] else ""
         raise LogFormatError(
-            f"{where}: time is not strictly increasing at row {i} "
-            f"(time[{i - 1}] = {t[i - 1]!r} s, time[{i}] = {t[i]!r} s); sort the log and "
-            "drop duplicate samples"
+            f"{where}: time {what} at row {i}{extra} (time[{i - 1}] = {t[i - 1]!r} s, "
+            f"time[{i}] = {t[i]!r} s); sort the log and drop duplicate samples, or read it "
+            "with time_order='drop' / 'split' (CLI: --time-order drop|split)"
         )
 
 
-def load_log(path: str | Path) -> pd.DataFrame:
+def _first_non_number(col: pd.Series) -> str:
+    vals = pd.to_numeric(col, errors="coerce")
+    bad = np.flatnonzero(vals.isna().to_numpy() & col.notna().to_numpy())
+    if bad.size == 0:
+        return ""
+    return f" (row {int(bad[0])} holds {_short(repr(col.iloc[bad[0]]), 40)})"
+
+
+def load_log(path: str | Path, time_order: str = "strict") -> pd.DataFrame:
     """Read a log (Parquet or CSV) for the virtual sensor and monitor.
 
     Checks that the input columns of the log contract are present (``time``, IMU,
-    joint encoders, force sensors).
+    joint encoders, force sensors); timestamps as in :func:`read_log`.
     """
-    return read_log(path, required=REQUIRED_INPUT_COLUMNS)
+    from grfguard.io.robot_schema import is_described_log, load_robot_log
+
+    df = read_log(path, time_order=time_order)
+    if is_described_log(df):  # Talos, G1, ...: columns from the robot description
+        return load_robot_log(path)
+    validate_log(df, required=REQUIRED_INPUT_COLUMNS, where=str(path))
+    return df

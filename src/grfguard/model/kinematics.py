@@ -21,6 +21,9 @@ import numpy as np
 from grfguard.errors import ConfigError
 from grfguard.model.mjcf import body_layout
 from grfguard.model.robot import SIDES, RobotConfig
+from grfguard.rotations import quat_to_matrix as quat_to_rotation
+from grfguard.rotations import rot_axis as _rot_axis
+from grfguard.rotations import rot_x, rot_y, rot_z, rotation_to_quat
 
 __all__ = [
     "rot_x",
@@ -33,77 +36,6 @@ __all__ = [
     "body_poses",
     "center_of_mass",
 ]
-
-
-def _angles(a: np.ndarray | float) -> np.ndarray:
-    return np.asarray(a, dtype=float)
-
-
-def rot_x(angle: np.ndarray | float) -> np.ndarray:
-    """Rotation matrices about x, shape ``angle.shape + (3, 3)``; angle in [rad]."""
-    a = _angles(angle)
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    rows = [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)]
-    return np.stack(rows, -2)
-
-
-def rot_y(angle: np.ndarray | float) -> np.ndarray:
-    """Rotation matrices about y, shape ``angle.shape + (3, 3)``; angle in [rad]."""
-    a = _angles(angle)
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    rows = [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)]
-    return np.stack(rows, -2)
-
-
-def rot_z(angle: np.ndarray | float) -> np.ndarray:
-    """Rotation matrices about z, shape ``angle.shape + (3, 3)``; angle in [rad]."""
-    a = _angles(angle)
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-    rows = [np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)]
-    return np.stack(rows, -2)
-
-
-def _rot_axis(axis: tuple[float, float, float], angle: np.ndarray) -> np.ndarray:
-    if axis == (1.0, 0.0, 0.0):
-        return rot_x(angle)
-    if axis == (0.0, 1.0, 0.0):
-        return rot_y(angle)
-    if axis == (0.0, 0.0, 1.0):
-        return rot_z(angle)
-    raise ValueError(f"unsupported joint axis {axis}")  # pragma: no cover
-
-
-def quat_to_rotation(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrices from unit quaternions (w, x, y, z), shape (..., 4) -> (..., 3, 3)."""
-    q = np.asarray(quat_wxyz, dtype=float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
-
-
-def rotation_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) with w >= 0 from rotation matrices (..., 3, 3)."""
-    R = np.asarray(R, dtype=float)
-    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
-    w = 0.5 * np.sqrt(np.maximum(0.0, 1 + m00 + m11 + m22))
-    x = 0.5 * np.sqrt(np.maximum(0.0, 1 + m00 - m11 - m22))
-    y = 0.5 * np.sqrt(np.maximum(0.0, 1 - m00 + m11 - m22))
-    z = 0.5 * np.sqrt(np.maximum(0.0, 1 - m00 - m11 + m22))
-    x = np.copysign(x, R[..., 2, 1] - R[..., 1, 2])
-    y = np.copysign(y, R[..., 0, 2] - R[..., 2, 0])
-    z = np.copysign(z, R[..., 1, 0] - R[..., 0, 1])
-    q = np.stack([w, x, y, z], -1)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 def _check_side(side: str) -> None:

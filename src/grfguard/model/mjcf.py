@@ -168,7 +168,7 @@ def body_layout(robot: RobotConfig) -> tuple[BodySpec, ...]:
             joint=None,
             axis=(0.0, 0.0, 0.0),
             mass=m_trunk,
-            com_in_body=(0.0, 0.0, robot.trunk_com_height),
+            com_in_body=(robot.trunk_com_x, robot.trunk_com_y, robot.trunk_com_height),
             inertia_diag=_box_inertia(
                 m_trunk, robot.trunk_depth, _trunk_width(robot), robot.trunk_height
             ),

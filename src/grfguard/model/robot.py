@@ -100,6 +100,10 @@ class RobotConfig:
     foot_mass_fraction: float = 0.03
     #: Height of the trunk's CoM above the hip joints in [m]. ASSUMED.
     trunk_com_height: float = 0.20
+    #: Forward offset of the trunk's CoM from the hip midpoint in [m] (0: centred).
+    trunk_com_x: float = 0.0
+    #: Leftward offset of the trunk's CoM from the hip midpoint in [m] (0: centred).
+    trunk_com_y: float = 0.0
     #: Trunk box height in [m] (inertia only). ASSUMED.
     trunk_height: float = 0.45
     #: Trunk box depth (x) in [m] (inertia only). ASSUMED.
@@ -143,6 +147,8 @@ class RobotConfig:
                 "trunk + 2 * (thigh + shank + foot) must equal 1"
             )
         _check_range("trunk_com_height", self.trunk_com_height, 0.0, 2.0, "m")
+        _check_range("trunk_com_x", self.trunk_com_x, -0.5, 0.5, "m")
+        _check_range("trunk_com_y", self.trunk_com_y, -0.5, 0.5, "m")
         _check_range("trunk_height", self.trunk_height, 0.05, 3.0, "m")
         _check_range("trunk_depth", self.trunk_depth, 0.02, 2.0, "m")
         _check_range("contact_radius", self.contact_radius, 0.0005, 0.05, "m")
@@ -217,21 +223,72 @@ class RobotConfig:
 
     @classmethod
     def from_toml(cls, text_or_path: str | Path) -> RobotConfig:
-        """Parse TOML text or a ``.toml`` file path."""
+        """Parse TOML text or a ``.toml`` file path.
+
+        Strict: the file must exist and be UTF-8 TOML text; the parameters are in a
+        ``[robot]`` table (or at the top level); a key that is not a parameter is an error.
+        Parameters left out take SURALP's values, with a
+        :class:`~grfguard.errors.GrfguardWarning` listing them (a silent SURALP value in
+        another robot's description gives wrong forces).
+        """
         p = Path(text_or_path) if not str(text_or_path).lstrip().startswith(("[", "#")) else None
         if p is not None and (p.suffix == ".toml" or p.exists()):
+            where = str(p)
             if not p.exists():
                 raise ConfigError(f"robot file {p} does not exist")
-            text = p.read_text()
-            where = str(p)
+            if p.is_dir():
+                raise ConfigError(f"robot file {p} is a directory; give the robot .toml file")
+            try:
+                text = p.read_bytes().decode("utf-8")
+            except UnicodeDecodeError:
+                raise ConfigError(
+                    f"robot file {p} is not a text file (not UTF-8); give a robot TOML "
+                    "(`grfguard robot show` prints one)"
+                ) from None
+            except OSError as exc:
+                raise ConfigError(f"robot file {p} cannot be read ({exc.strerror})") from None
         else:
             text = str(text_or_path)
             where = "<string>"
+        if "\x00" in text:
+            raise ConfigError(f"{where} is a binary file, not a robot TOML")
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{where} is not valid TOML: {exc}") from exc
-        return cls.from_dict(data)
+            raise ConfigError(f"{where} is not valid TOML: {exc}") from None
+        if "robot" in data:
+            if not isinstance(data["robot"], dict):
+                raise ConfigError(
+                    f"{where}: key 'robot' must be a [robot] table of parameters, got "
+                    f"{data['robot']!r}; write '[robot]' then one 'name = value' line each"
+                )
+            others = sorted(set(data) - {"robot"})
+            if others:
+                raise ConfigError(
+                    f"{where}: key(s) {others} are outside the [robot] table; move them into "
+                    "it (or remove them)"
+                )
+            data = data["robot"]
+        try:
+            robot = cls.from_dict(data)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        except TypeError as exc:
+            raise ConfigError(f"{where}: bad robot parameters ({exc})") from None
+        known = [f.name for f in dataclasses.fields(cls) if f.name != "extra"]
+        missing = [k for k in known if k not in data]
+        if missing:
+            import warnings
+
+            from grfguard.errors import GrfguardWarning
+
+            warnings.warn(
+                f"{where}: robot key(s) {missing} not given; SURALP's values are used "
+                "(`grfguard robot show` lists them); add them to the [robot] table",
+                GrfguardWarning,
+                stacklevel=2,
+            )
+        return robot
 
 
 def _toml_value(v: Any) -> str:

@@ -1,4 +1,6 @@
-"""Signal reconstruction of faulty sole sensors.
+"""Signal reconstruction of faulty sole sensors: the rules and the hand-over blend.
+
+The stage that applies them sample by sample is :class:`~grfguard.recover.recovery.Recovery`.
 
 - additive faults (offset, drift): ``N_rec = N_meas - η̂``;
 - gain: ``N_rec = N_meas / ĝ``;
@@ -16,13 +18,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["foot_balance", "HandOver"]
-
-
-def foot_balance(total_n: float, others_n: list[float]) -> float:
-    """Force of one corner from the foot total minus the other corners, clipped at 0 [N]."""
-    v = total_n - math.fsum(others_n)
-    return v if v > 0.0 else 0.0
+__all__ = ["HandOver"]
 
 
 class HandOver:

@@ -413,7 +413,7 @@ def plot_flags(
             any_o = True
         if s in summ.index and np.isfinite(summ.loc[s, "delay_s"]):
             d = float(summ.loc[s, "delay_s"])
-            x = float(summ.loc[s, "fault_onset_s"]) + d
+            x = float(summ.loc[s, "onset_s"]) + d
             if t[0] <= x <= t[-1]:
                 ax.annotate(f"delay {d:.2f} s", (x, 1.0), xytext=(4, 2),
                             textcoords="offset points", fontsize=8, va="bottom",
@@ -546,12 +546,12 @@ def plot_summary_table(
     cols = [
         ("state", "state", 0),
         ("injected_kind", "injected", 0),
-        ("detected_kind", "detected", 0),
+        ("kind_estimated", "detected", 0),
         ("delay_s", "delay [s]", 2),
         ("false_alarms", "false\nalarms", 0),
         ("true_size_n", "true size\n[N]", 1),
         ("estimated_size_n", "est. size\n[N]", 1),
-        ("size_error_n", "size error\n[N]", 1),
+        ("fault_size_error_n", "size error\n[N]", 1),
         ("recovery_rmse_n", "recovery\nRMSE [N]", 1),
     ]
     cols = [c for c in cols if c[0] in summ.columns]

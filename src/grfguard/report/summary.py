@@ -1,21 +1,19 @@
 """Per-sensor summary of a ``grfguard run`` output: state, kind, size, delay, errors.
 
-When ``grfguard.evaluate.detection`` metrics are given they win; otherwise a simple
-fallback is computed here from the columns that are present:
+Every metric (delay, false alarms, kind, fault size and its error, recovery and raw RMSE)
+is :func:`grfguard.evaluate.detection.sensor_detection`'s, under the same name, so the
+report and ``grfguard evaluate`` print the same numbers. The report adds what only it
+needs:
 
-* fault window: samples where ``fault_kind_<s>`` is not ``none`` (or, without a kind
-  column, where ``fault_<s>`` is non-zero); onset = its first sample [s];
-* alarm onsets: rising edges of ``flag_<s>`` (a flag already high at the first sample
-  counts as an onset there);
-* delay [s]: first alarm onset at or after the fault onset minus the fault onset (0
-  if the flag was already high at the onset);
-* false alarms: alarm episodes starting outside every fault window;
-* size [N]: mean of the true fault (``fault_<s>``) and of the estimate (``eta_<s>``)
-  over the last second of the fault window; size error = |estimate - true|;
-* recovery RMSE [N]: RMS of ``recovered_<s> - true_force_<s>`` over the flagged
-  samples of the fault window (``raw RMSE``: same for ``force_<s>``).
+* ``state``: detected / missed (faulty sensor), false alarm / healthy (no fault), alarm /
+  ok (no truth in the log);
+* ``injected_kind``: the injected kind (``unknown`` without truth columns, ``none`` when
+  healthy); ``alarm_onset_s``: fault onset plus delay, or the first flag rise of a sensor
+  without a fault [s].
 
-Undefined values are ``nan`` (never a sentinel number).
+The fault windows drawn in the figures are where ``fault_kind_<s>`` is not ``none`` (or,
+without a kind column, where ``fault_<s>`` is non-zero). Undefined values are ``nan``
+(never a sentinel number).
 """
 
 from __future__ import annotations
@@ -28,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from grfguard.errors import LogFormatError
+from grfguard.evaluate.detection import sensor_detection
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = [
@@ -44,15 +43,16 @@ __all__ = [
 SUMMARY_COLUMNS: tuple[str, ...] = (
     "state",
     "injected_kind",
-    "detected_kind",
+    "kind_estimated",
     "kind_correct",
-    "fault_onset_s",
+    "onset_s",
     "alarm_onset_s",
     "delay_s",
     "false_alarms",
+    "false_alarm_time_s",
     "true_size_n",
     "estimated_size_n",
-    "size_error_n",
+    "fault_size_error_n",
     "recovery_rmse_n",
     "raw_rmse_n",
 )
@@ -69,19 +69,19 @@ _METRIC_ALIASES: dict[str, str] = {
     "kind_correct": "kind_correct",
     "recovery_rmse": "recovery_rmse_n",
     "recovery_rmse_n": "recovery_rmse_n",
-    "fault_size_error": "size_error_n",
-    "size_error": "size_error_n",
-    "size_error_n": "size_error_n",
-    "fault_size_error_n": "size_error_n",
-    "detected_kind": "detected_kind",
-    "kind": "detected_kind",
-    "kind_estimated": "detected_kind",
+    "fault_size_error": "fault_size_error_n",
+    "size_error": "fault_size_error_n",
+    "size_error_n": "fault_size_error_n",
+    "fault_size_error_n": "fault_size_error_n",
+    "detected_kind": "kind_estimated",
+    "kind": "kind_estimated",
+    "kind_estimated": "kind_estimated",
     "injected_kind": "injected_kind",
     "true_kind": "injected_kind",
     "fault_kind": "injected_kind",
     "faulty": "faulty",
-    "onset_s": "fault_onset_s",
-    "fault_onset_s": "fault_onset_s",
+    "onset_s": "onset_s",
+    "fault_onset_s": "onset_s",
     "alarm_onset_s": "alarm_onset_s",
     "first_alarm_s": "alarm_onset_s",
     "true_size_n": "true_size_n",
@@ -172,21 +172,13 @@ def _mode(ser: pd.Series, mask: np.ndarray) -> str:
     return str(counts.index[0])
 
 
-def _rmse(a: np.ndarray) -> float:
-    a = a[np.isfinite(a)]
-    return float(np.sqrt(np.mean(a**2))) if a.size else math.nan
-
-
-def _fallback(df: pd.DataFrame, t: np.ndarray, s: str) -> dict[str, Any]:
+def _report_row(df: pd.DataFrame, s: str) -> dict[str, Any]:
+    """The metrics of ``evaluate`` for one sensor plus the report's state and kinds."""
+    m = sensor_detection(df, df, s)
     row: dict[str, Any] = dict.fromkeys(SUMMARY_COLUMNS, math.nan)
+    row.update({k: v for k, v in m.items() if k in SUMMARY_COLUMNS})
     fm = fault_mask(df, s)
     has_flag = f"flag_{s}" in df.columns
-    flag = (
-        df[f"flag_{s}"].fillna(False).to_numpy().astype(bool)
-        if has_flag
-        else np.zeros(t.size, dtype=bool)
-    )
-    rises = np.flatnonzero(np.diff(flag.astype(np.int8), prepend=0) == 1)
     injected = fm is not None and bool(fm.any())
     if fm is None:
         row["injected_kind"] = "unknown"
@@ -195,54 +187,23 @@ def _fallback(df: pd.DataFrame, t: np.ndarray, s: str) -> dict[str, Any]:
     else:
         kc = f"fault_kind_{s}"
         row["injected_kind"] = _mode(df[kc], fm) if kc in df.columns else "fault"
-    kc = f"kind_{s}"
-    if kc in df.columns and flag.any():
-        scope = flag & fm if injected and (flag & fm).any() else flag
-        row["detected_kind"] = _mode(df[kc], scope)
+    if not has_flag:
+        row["false_alarms"] = row["false_alarm_time_s"] = math.nan
+        row["kind_estimated"] = "n/a"
+    if m["faulty"]:
+        row["alarm_onset_s"] = row["onset_s"] + row["delay_s"]
+        row["state"] = "detected" if m["detected"] else ("missed" if has_flag else "faulty")
+        return row
+    if injected:  # a fault column without kinds: a window the metrics cannot match
+        row["state"] = "faulty"
+        return row
+    rises = alarm_onsets(df, s)
+    if rises.size:
+        row["alarm_onset_s"] = float(rises[0])
+    if fm is None:
+        row["state"] = "alarm" if rises.size else "ok"
     else:
-        row["detected_kind"] = "none" if has_flag else "n/a"
-    if injected:
-        onset_i = int(np.flatnonzero(fm)[0])
-        row["fault_onset_s"] = float(t[onset_i])
-        in_fault_rises = rises[fm[rises]]
-        if flag[onset_i]:
-            row["alarm_onset_s"] = float(t[onset_i])
-        elif in_fault_rises.size:
-            row["alarm_onset_s"] = float(t[in_fault_rises[0]])
-        if not math.isnan(row["alarm_onset_s"]):
-            row["delay_s"] = row["alarm_onset_s"] - row["fault_onset_s"]
-        row["false_alarms"] = int((~fm[rises]).sum()) if has_flag else math.nan
-        row["kind_correct"] = (
-            bool(row["detected_kind"] == row["injected_kind"])
-            if row["detected_kind"] not in ("none", "n/a")
-            else math.nan
-        )
-        last = fm & (t >= t[np.flatnonzero(fm)[-1]] - 1.0)
-        if f"fault_{s}" in df.columns:
-            row["true_size_n"] = float(np.nanmean(df[f"fault_{s}"].to_numpy(dtype=float)[last]))
-        if f"eta_{s}" in df.columns:
-            row["estimated_size_n"] = float(np.nanmean(df[f"eta_{s}"].to_numpy(dtype=float)[last]))
-        row["size_error_n"] = abs(row["estimated_size_n"] - row["true_size_n"])
-        tc = f"true_force_{s}"
-        if tc in df.columns:
-            true = df[tc].to_numpy(dtype=float)
-            scope = fm & flag
-            if f"recovered_{s}" in df.columns and scope.any():
-                rec = df[f"recovered_{s}"].to_numpy(dtype=float)
-                row["recovery_rmse_n"] = _rmse(rec[scope] - true[scope])
-            if f"force_{s}" in df.columns and scope.any():
-                raw = df[f"force_{s}"].to_numpy(dtype=float)
-                row["raw_rmse_n"] = _rmse(raw[scope] - true[scope])
-        detected = not math.isnan(row["alarm_onset_s"])
-        row["state"] = "detected" if detected else ("missed" if has_flag else "faulty")
-    else:
-        row["false_alarms"] = int(rises.size) if has_flag else math.nan
-        if rises.size:
-            row["alarm_onset_s"] = float(t[rises[0]])
-        if fm is None:
-            row["state"] = "alarm" if flag.any() else "ok"
-        else:
-            row["state"] = "false alarm" if flag.any() else "healthy"
+        row["state"] = "false alarm" if rises.size else "healthy"
     return row
 
 
@@ -288,10 +249,10 @@ def sensor_summary(
 
     Args:
         df: Output of ``grfguard run`` (``time`` [s] plus any of the per-sensor columns).
-        metrics: Optional per-sensor metrics from ``grfguard.evaluate.detection``
-            (anything :func:`normalize_metrics` accepts). Known keys (``delay_s``, ``false_alarms``,
-            ``recovery_rmse_n``, ``size_error_n``, ``kind_correct``, ``detected`` ...)
-            replace the fallback values; unknown keys are added as extra columns.
+        metrics: Optional per-sensor metrics (anything :func:`normalize_metrics`
+            accepts). Known keys (``delay_s``, ``false_alarms``, ``recovery_rmse_n``,
+            ``fault_size_error_n``, ``kind_correct``, ``detected`` ...) replace the values
+            computed here; unknown keys are added as extra columns.
 
     Returns:
         DataFrame indexed by sensor name with :data:`SUMMARY_COLUMNS` (+ extras);
@@ -301,8 +262,8 @@ def sensor_summary(
         LogFormatError: If ``time`` is missing or not strictly increasing, or
             ``metrics`` is not a mapping of mappings.
     """
-    t = _time(df)
-    rows = {s: _fallback(df, t, s) for s in detect_sensors(df)}
+    _time(df)  # validates the time axis
+    rows = {s: _report_row(df, s) for s in detect_sensors(df)}
     for s, m in normalize_metrics(metrics).items():
         row = rows.setdefault(s, dict.fromkeys(SUMMARY_COLUMNS, math.nan))
         faulty, detected = None, None

@@ -95,6 +95,7 @@ def run_physics(
     progress: Callable[[float], Any] | None = None,
     progress_offset: float = 0.0,
     progress_scale: float = 1.0,
+    perturb: Callable[[mujoco.MjModel], Any] | None = None,
 ) -> PhysicsResult:
     """Roll the plan out open loop in MuJoCo and return the sensordata.
 
@@ -104,6 +105,8 @@ def run_physics(
         progress: Optional ``callable(fraction_done)``.
         progress_offset: Fraction reported before the physics starts.
         progress_scale: Fraction of the total the physics accounts for.
+        perturb: Optional ``callable(model)`` that edits the built ``MjModel`` in place
+            before the run (reality gap: sensor position errors).
 
     Returns:
         The :class:`PhysicsResult`.
@@ -113,6 +116,8 @@ def run_physics(
             the planned height); the message gives the time and the reason.
     """
     model = build_model(robot)
+    if perturb is not None:
+        perturb(model)
     data = mujoco.MjData(model)
     index = _sensor_index(model)
     # actuator order = joint order of the model; map to JOINT_NAMES
@@ -212,6 +217,7 @@ def simulate(
     noise: NoiseConfig | None = None,
     seed: int = 0,
     progress: Callable[[float], Any] | None = None,
+    reality: Any = None,
 ) -> pd.DataFrame:
     """Simulate an open-loop walk in MuJoCo and return a log-contract DataFrame.
 
@@ -223,6 +229,9 @@ def simulate(
             for clean data).
         seed: Seed of ``numpy.random.default_rng`` for every noise draw.
         progress: Optional ``callable(fraction_done)`` called with values in [0, 1].
+        reality: Optional :class:`grfguard.sim.reality.RealityGap`: the physics and the
+            sensors follow the true robot, ``attrs["robot"]`` keeps ``robot`` and
+            ``attrs["reality"]`` records the resolved gap (truth only).
 
     Returns:
         One row per 1 ms sample. Columns: ``time``, ``imu_acc_*`` (specific force, IMU
@@ -262,8 +271,14 @@ def simulate(
     plan = plan_walk(robot, gait)
     if progress is not None:
         progress(0.1)
-    phys = run_physics(robot, plan, progress, progress_offset=0.1, progress_scale=0.85)
+    true_robot = robot if reality is None else reality.true_robot(robot)
+    perturb = None if reality is None else reality.perturb_model
+    phys = run_physics(
+        true_robot, plan, progress, progress_offset=0.1, progress_scale=0.85, perturb=perturb
+    )
     cols = _log_columns(robot, plan, phys, noise, int(seed))
+    if reality is not None:
+        cols = reality.apply_to_columns(cols, plan.contact_ref, SAMPLE_RATE)
     df = pd.DataFrame(cols)
     df.attrs.update(
         {
@@ -278,6 +293,8 @@ def simulate(
             "step_times": [float(v) for v in plan.step_times],
         }
     )
+    if reality is not None:
+        df.attrs["reality"] = reality.resolve()
     if progress is not None:
         progress(1.0)
     return df

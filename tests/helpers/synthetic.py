@@ -199,7 +199,7 @@ def synthetic_run(
     df.attrs.update(
         {
             "robot": "suralp",
-            "source": "synthetic (grfguard.report._synthetic)",
+            "source": "synthetic (helpers.synthetic)",
             "gait": {
                 "step_period_s": step_period_s,
                 "double_support_fraction": double_support_fraction,

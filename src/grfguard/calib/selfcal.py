@@ -1,0 +1,502 @@
+"""Model self-calibration: identify corrections to the robot description from fault-free data.
+
+Uses only the redundancy of fault-free walking (no simulation truth):
+
+* **Load-cell zeros** ``z_i``: a swing foot carries nothing, so its load cells read
+  their zero: ``z_i = median(f_i)`` over swing samples (planned swing, 60 ms away from
+  lift-off and touchdown).
+* **Gyro bias** ``b_g`` (IMU frame): mean of ``gyro - omega_quat`` where ``omega_quat``
+  is the body rate implied by the orientation over 0.5 s windows.
+* **Accelerometer bias** ``b_a`` (IMU frame): the robot starts and ends at rest, so the
+  mean specific force is gravity: ``b_a = mean(acc - R_WI^T g e_z)``.
+* **IMU mounting** ``R_BI`` (roll, pitch; yaw is not observable from gravity): when both
+  feet stand flat (double support, both feet loaded), the sole normal computed by leg
+  kinematics in the trunk frame, ``z_B``, is vertical, so the gravity direction the IMU
+  reports, ``g_I = R_WI^T e_z``, satisfies ``g_I = R_BI^T z_B``. Least squares over the
+  small rotation, iterated to convergence (Gauss-Newton).
+* **Load-cell gains and mass**: the eight corrected load cells carry the whole body,
+  ``sum_i (f_i - z_i) / k_i = m (g + a_z)``, with ``a_z`` the vertical acceleration of
+  the trunk (corrected IMU). Linear least squares in ``w_i = 1 / (k_i m)`` over 20 ms
+  averages; the moving centre of pressure makes the eight ``w_i`` identifiable. Without a
+  measured mass only the products ``k_i m`` are known: the gains are normalized to mean 1
+  and the mass becomes the weight the load cells see; with ``measured_mass_kg``,
+  ``k_i = 1 / (w_i m)``.
+* **Trunk CoM** (horizontal): the time average of the ZMP equals that of the CoM
+  (the mean horizontal acceleration of a walk from rest to rest is zero), so the mean of
+  ``CoP - CoM_model`` (corrected forces and attitude, trunk-yaw frame) is
+  ``(m_trunk / m) d_xy``.
+
+The corrections are written as a ``[model_corrections]`` TOML table (values and 1-sigma
+uncertainties) and applied to a log by :func:`apply_corrections` before the estimator
+sees it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from grfguard.errors import ConfigError, LogFormatError
+from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_ACC, IMU_GYRO, IMU_QUAT
+from grfguard.model.kinematics import (
+    center_of_mass,
+    leg_fk,
+    quat_to_rotation,
+    rotation_to_quat,
+)
+from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, SIDES, RobotConfig
+
+__all__ = [
+    "ModelCorrections",
+    "estimate_corrections",
+    "apply_corrections",
+    "robot_of",
+]
+
+_EDGE_S = 0.06  # margin around contact transitions [s]
+#: Relative ridge weight pulling the load-cell gains toward a common value (only
+#: directions the walk does not excite are affected).
+GAIN_RIDGE = 0.01
+
+
+def _rpy_to_R(rpy_rad: np.ndarray) -> np.ndarray:
+    from grfguard.model.kinematics import rot_x, rot_y, rot_z
+
+    r, p, y = rpy_rad
+    return rot_z(y) @ rot_y(p) @ rot_x(r)
+
+
+def _R_to_rpy(R: np.ndarray) -> np.ndarray:
+    pitch = math.asin(max(-1.0, min(1.0, -R[2, 0])))
+    roll = math.atan2(R[2, 1], R[2, 2])
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    return np.array([roll, pitch, yaw])
+
+
+@dataclass(frozen=True)
+class ModelCorrections:
+    """Corrections to the robot description and the sensors' calibration.
+
+    Attributes:
+        mass_kg: Corrected total mass in [kg] (the weight the load cells see / g when
+            no measured mass was given), None to keep the model's.
+        trunk_com_x_m: Trunk CoM forward offset in [m] (replaces the model's).
+        trunk_com_y_m: Trunk CoM leftward offset in [m].
+        imu_mount_rpy_deg: IMU mounting rotation ``R_BI`` (roll, pitch, yaw) in [deg].
+        gyro_bias_rad_s: Gyro bias in the IMU frame in [rad/s].
+        acc_bias_m_s2: Accelerometer bias in the IMU frame in [m/s^2].
+        load_cell_gain: Gain of each load cell (sensor name -> gain).
+        load_cell_zero_n: Zero of each load cell in [N].
+        sigma: 1-sigma uncertainty of each entry (same keys, flattened).
+        measured_mass: True when ``mass_kg`` is a given measured mass.
+    """
+
+    mass_kg: float | None = None
+    trunk_com_x_m: float = 0.0
+    trunk_com_y_m: float = 0.0
+    imu_mount_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    acc_bias_m_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    load_cell_gain: dict[str, float] = field(
+        default_factory=lambda: {s: 1.0 for s in SENSOR_NAMES}
+    )
+    load_cell_zero_n: dict[str, float] = field(
+        default_factory=lambda: {s: 0.0 for s in SENSOR_NAMES}
+    )
+    sigma: dict[str, float] = field(default_factory=dict, compare=False)
+    measured_mass: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
+            v = tuple(float(x) for x in getattr(self, name))
+            if len(v) != 3 or not all(math.isfinite(x) for x in v):
+                raise ConfigError(f"model_corrections.{name} = {v} must be 3 finite numbers")
+            object.__setattr__(self, name, v)
+        for name in ("load_cell_gain", "load_cell_zero_n"):
+            d = getattr(self, name)
+            missing = [s for s in SENSOR_NAMES if s not in d]
+            if missing:
+                raise ConfigError(f"model_corrections.{name} lacks sensor(s) {missing}")
+        bad = {s: g for s, g in self.load_cell_gain.items() if not 0.2 < float(g) < 5.0}
+        if bad:
+            raise ConfigError(
+                f"model_corrections.load_cell_gain {bad} outside (0.2, 5); recalibrate on "
+                "fault-free data"
+            )
+        if self.mass_kg is not None and not 1.0 <= float(self.mass_kg) <= 1000.0:
+            raise ConfigError(f"model_corrections.mass_kg = {self.mass_kg} outside [1, 1000] kg")
+
+    # ------------------------------------------------------------------ TOML
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        for k in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
+            d[k] = list(d[k])
+        if d["mass_kg"] is None:
+            del d["mass_kg"]
+        return d
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ModelCorrections:
+        if "model_corrections" in data and isinstance(data["model_corrections"], dict):
+            data = data["model_corrections"]
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown model_corrections key(s) {unknown}; known keys: {sorted(known)}"
+            )
+        return cls(**data)
+
+    def to_toml(self) -> str:
+        """A ``[model_corrections]`` table (append to a thresholds file)."""
+        d = self.to_dict()
+        lines = [
+            "# model corrections from `grfguard calibrate --model` (grfguard.calib.selfcal);",
+            "# sigma holds 1-sigma uncertainties",
+            "[model_corrections]",
+        ]
+        for k, v in d.items():
+            if isinstance(v, dict):
+                continue
+            if isinstance(v, bool):
+                lines.append(f"{k} = {'true' if v else 'false'}")
+            elif isinstance(v, list):
+                lines.append(f"{k} = [{', '.join(repr(float(x)) for x in v)}]")
+            else:
+                lines.append(f"{k} = {float(v)!r}")
+        for k in ("load_cell_gain", "load_cell_zero_n", "sigma"):
+            lines.append(f"[model_corrections.{k}]")
+            lines += [f'"{s}" = {float(v)!r}' for s, v in d[k].items()]
+        return "\n".join(lines) + "\n"
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> ModelCorrections | None:
+        """The ``[model_corrections]`` table of a TOML file, None when it has none."""
+        p = Path(path)
+        try:
+            data = tomllib.loads(p.read_text())
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise ConfigError(f"cannot read model corrections from {p}: {exc}") from exc
+        if "model_corrections" not in data:
+            return None
+        return cls.from_dict(data["model_corrections"])
+
+    def summary(self) -> str:
+        """One line for reports and the CLI."""
+        g = np.array([self.load_cell_gain[s] for s in SENSOR_NAMES])
+        z = np.array([self.load_cell_zero_n[s] for s in SENSOR_NAMES])
+        m = "model" if self.mass_kg is None else f"{self.mass_kg:.2f} kg"
+        r = self.imu_mount_rpy_deg
+        return (
+            f"mass {m}, trunk CoM ({100 * self.trunk_com_x_m:+.1f}, "
+            f"{100 * self.trunk_com_y_m:+.1f}) cm, IMU mount roll {r[0]:+.2f} deg pitch "
+            f"{r[1]:+.2f} deg, gyro bias {np.round(self.gyro_bias_rad_s, 4).tolist()} rad/s, "
+            f"gains {g.min():.3f}-{g.max():.3f}, zeros {z.min():+.1f}..{z.max():+.1f} N"
+        )
+
+
+# ---------------------------------------------------------------------- helpers
+def robot_of(log: pd.DataFrame) -> RobotConfig:
+    """The robot description of a log (``attrs["robot"]``, SURALP when absent)."""
+    r = (getattr(log, "attrs", {}) or {}).get("robot")
+    if r is None:
+        return RobotConfig()
+    if isinstance(r, RobotConfig):
+        return r
+    if isinstance(r, str):
+        import json
+
+        r = json.loads(r)
+    return RobotConfig.from_dict(dict(r))
+
+
+def _arr(log: pd.DataFrame, cols: Sequence[str]) -> np.ndarray:
+    missing = [c for c in cols if c not in log.columns]
+    if missing:
+        raise LogFormatError(
+            f"self-calibration needs column(s) {missing}; see grfguard.io.schema"
+        )
+    return log[list(cols)].to_numpy(dtype=float)
+
+
+def _away_from_edges(c: np.ndarray, dt: float) -> np.ndarray:
+    """Mask of samples at least ``_EDGE_S`` away from any change of ``c`` (T, k)."""
+    ch = np.any(np.diff(c, axis=0) != 0, axis=1)
+    idx = np.flatnonzero(ch)
+    bad = np.zeros(len(c), dtype=bool)
+    w = int(round(_EDGE_S / dt))
+    for i in idx:
+        bad[max(0, i - w) : i + w + 2] = True
+    return ~bad
+
+
+def _blocks(x: np.ndarray, n: int) -> np.ndarray:
+    m = (len(x) // n) * n
+    return x[:m].reshape(-1, n, *x.shape[1:]).mean(axis=1)
+
+
+@dataclass
+class _LogData:
+    dt: float
+    quat: np.ndarray
+    acc: np.ndarray
+    gyro: np.ndarray
+    q: np.ndarray
+    f: np.ndarray
+    cref: np.ndarray
+
+
+def _load(log: pd.DataFrame) -> _LogData:
+    t = _arr(log, ["time"])[:, 0]
+    if len(t) < 1000:
+        raise LogFormatError(
+            f"self-calibration needs at least 1000 samples of fault-free walking, got {len(t)}"
+        )
+    dt = float(np.median(np.diff(t)))
+    return _LogData(
+        dt,
+        _arr(log, IMU_QUAT),
+        _arr(log, IMU_ACC),
+        _arr(log, IMU_GYRO),
+        _arr(log, [f"q_{j}" for j in JOINT_NAMES]),
+        _arr(log, FORCE_COLUMNS),
+        _arr(log, CONTACT_REF),
+    )
+
+
+# ---------------------------------------------------------------------- estimation
+def estimate_corrections(
+    logs: pd.DataFrame | Sequence[pd.DataFrame],
+    measured_mass_kg: float | None = None,
+) -> ModelCorrections:
+    """Identify model and sensor corrections from fault-free logs of one robot.
+
+    Args:
+        logs: One or more fault-free logs (log contract; ``contact_ref_*`` needed) of the
+            same robot; about one minute of walking with standing at start and end.
+        measured_mass_kg: The robot's weighed mass in [kg], if known (fixes the gains'
+            common scale); None: gains normalized to mean 1 and the mass becomes the
+            weight the load cells see.
+
+    Returns:
+        The :class:`ModelCorrections` with 1-sigma uncertainties in ``sigma``.
+
+    Raises:
+        LogFormatError: If a required column is missing or a log is too short.
+    """
+    frames = [logs] if isinstance(logs, pd.DataFrame) else list(logs)
+    if not frames:
+        raise LogFormatError("estimate_corrections needs at least one fault-free log")
+    robot = robot_of(frames[0])
+    data = [_load(df) for df in frames]
+    g = robot.gravity
+    sigma: dict[str, float] = {}
+
+    # 1. zeros from swing feet
+    zero = np.zeros(8)
+    for si in range(2):
+        vals = []
+        for d in data:
+            m = (d.cref[:, si] < 0.5) & _away_from_edges(d.cref, d.dt)
+            vals.append(d.f[m, 4 * si : 4 * si + 4])
+        v = np.concatenate(vals)
+        if len(v) < 50:
+            raise LogFormatError("self-calibration found no swing phase: walk, not stand")
+        zero[4 * si : 4 * si + 4] = np.median(v, axis=0)
+        for k in range(4):
+            sigma[f"zero_{SENSOR_NAMES[4 * si + k]}"] = float(
+                1.2533 * np.std(v[:, k]) / math.sqrt(max(1.0, len(v) * data[0].dt / 0.02))
+            )
+
+    # 2. gyro bias from the orientation's rate over 0.5 s windows
+    diffs = []
+    for d in data:
+        n = int(round(0.5 / d.dt))
+        R = quat_to_rotation(d.quat)
+        for k0 in range(0, len(R) - n, n):
+            dR = R[k0].T @ R[k0 + n]
+            ang = _so3_log(dR) / (n * d.dt)
+            diffs.append(d.gyro[k0 : k0 + n].mean(axis=0) - ang)
+    diffs = np.array(diffs)
+    b_g = np.median(diffs, axis=0)
+    sigma["gyro_bias"] = float(np.std(diffs) / math.sqrt(len(diffs)))
+
+    # 3. accelerometer bias: mean specific force = gravity (rest to rest)
+    ab = []
+    for d in data:
+        R = quat_to_rotation(d.quat)
+        ab.append(d.acc - g * R[:, 2, :])  # R^T e_z = third row of R
+    ab = np.concatenate(ab)
+    b_a = ab.mean(axis=0)
+    sigma["acc_bias"] = float(np.std(ab) / math.sqrt(len(ab) * data[0].dt / 0.1))
+
+    # 4. IMU mounting from flat soles in double support
+    zB, gI = [], []
+    for d in data:
+        fz = d.f - zero
+        load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
+        m = (
+            (d.cref.min(axis=1) > 0.5)
+            & _away_from_edges(d.cref, d.dt)
+            & (load.min(axis=1) > 0.15 * robot.weight)
+        )
+        if not m.any():
+            continue
+        R_WI = quat_to_rotation(d.quat[m])
+        for si, s in enumerate(SIDES):
+            _, R_BS = leg_fk(robot, s, np.zeros(3), np.eye(3), d.q[m, 6 * si : 6 * si + 6])
+            zB.append(R_BS[:, :, 2])
+            gI.append(R_WI[:, 2, :])
+    if not zB:
+        raise LogFormatError("self-calibration found no double support with both feet loaded")
+    zB_all, gI_all = np.concatenate(zB), np.concatenate(gI)
+    R_BI = np.eye(3)
+    for _ in range(5):
+        pred = zB_all @ R_BI  # R_BI^T z per row
+        r = (gI_all - pred).reshape(-1)
+        # d(R_BI^T z)/d theta for R_BI <- R_BI (I + [theta]x): -[theta]x R_BI^T z = [p]x theta
+        J = np.zeros((len(pred), 3, 2))
+        J[:, 0, 1], J[:, 1, 0] = -pred[:, 2], pred[:, 2]
+        J[:, 2, 0], J[:, 2, 1] = -pred[:, 1], pred[:, 0]
+        J = J.reshape(-1, 2)
+        th, *_ = np.linalg.lstsq(J, r, rcond=None)
+        R_BI = R_BI @ _rpy_to_R(np.array([th[0], th[1], 0.0]))
+        if np.max(np.abs(th)) < 1e-9:
+            break
+    res = gI_all - zB_all @ R_BI
+    n_eff = max(1.0, len(res) * data[0].dt / 0.2)
+    sigma["imu_mount_deg"] = float(np.degrees(np.std(res[:, :2]) / math.sqrt(n_eff)))
+    rpy = _R_to_rpy(R_BI)
+
+    # 5. gains and mass from the whole-body balance (0.1 s means: a_z averages out; the
+    # accelerometer's impact vibration correlates with the load pattern, so it is not used)
+    A, y = [], []
+    for d in data:
+        n = max(1, int(round(0.1 / d.dt)))
+        A.append(_blocks(d.f - zero, n))
+        y.append(np.full(len(A[-1]), g))
+    A_all, y_all = np.concatenate(A), np.concatenate(y)
+    w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
+    # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
+    reg = GAIN_RIDGE * float((A_all**2).sum()) / 8.0
+    M = A_all.T @ A_all + reg * np.eye(8)
+    w = np.linalg.solve(M, A_all.T @ y_all + reg * w0)
+    res = y_all - A_all @ w
+    cov = np.linalg.inv(M) * float(np.var(res))
+    km = 1.0 / w  # gain_i * mass
+    if measured_mass_kg is not None:
+        mass = float(measured_mass_kg)
+        gains = km / mass
+    else:
+        mass = float(np.mean(km))
+        gains = km / mass
+    for i, s in enumerate(SENSOR_NAMES):
+        sigma[f"gain_{s}"] = float(math.sqrt(max(cov[i, i], 0.0)) * km[i] ** 2 / mass)
+    var_km = np.clip(np.diag(cov), 0.0, None) * km**4
+    sigma["mass_kg"] = float(math.sqrt(var_km.sum()) / 8.0)
+
+    # 6. trunk CoM from mean(CoP - CoM)
+    rob_c = dataclasses.replace(robot, mass=mass)
+    diffs_xy = []
+    p_F = robot.sensor_positions_in_foot()
+    for d in data:
+        fz = (d.f - zero) / gains
+        R_WB = quat_to_rotation(d.quat) @ R_BI.T
+        # yaw-free trunk frame: remove the trunk's heading
+        yaw = np.arctan2(R_WB[:, 1, 0], R_WB[:, 0, 0])
+        c, s_ = np.cos(-yaw), np.sin(-yaw)
+        Rz = np.zeros_like(R_WB)
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s_, s_, c
+        Rz[:, 2, 2] = 1.0
+        R_H = Rz @ R_WB
+        com = center_of_mass(rob_c, np.zeros(3), R_H, d.q)
+        num = np.zeros((len(fz), 2))
+        for si, sd in enumerate(SIDES):
+            p_S, R_S = leg_fk(rob_c, sd, np.zeros(3), R_H, d.q[:, 6 * si : 6 * si + 6])
+            for k in range(4):
+                pk = p_S + R_S @ np.array([p_F[k, 0], p_F[k, 1], 0.0])
+                num += fz[:, 4 * si + k, None] * pk[:, :2]
+        tot = fz.sum(axis=1)
+        ok = tot > 0.5 * rob_c.weight
+        cop = num[ok] / tot[ok, None]
+        diffs_xy.append(cop - com[ok, :2])
+    dxy = np.concatenate(diffs_xy)
+    frac = robot.trunk_mass_fraction
+    d_com = dxy.mean(axis=0) / frac
+    sigma["trunk_com_m"] = float(
+        np.std(dxy) / frac / math.sqrt(max(1.0, len(dxy) * data[0].dt / 1.0))
+    )
+    return ModelCorrections(
+        mass_kg=mass,
+        trunk_com_x_m=float(robot.trunk_com_x + d_com[0]),
+        trunk_com_y_m=float(robot.trunk_com_y + d_com[1]),
+        imu_mount_rpy_deg=tuple(float(v) for v in np.degrees(rpy)),
+        gyro_bias_rad_s=tuple(float(v) for v in b_g),
+        acc_bias_m_s2=tuple(float(v) for v in b_a),
+        load_cell_gain={s: float(v) for s, v in zip(SENSOR_NAMES, gains, strict=True)},
+        load_cell_zero_n={s: float(v) for s, v in zip(SENSOR_NAMES, zero, strict=True)},
+        sigma=sigma,
+        measured_mass=measured_mass_kg is not None,
+    )
+
+
+def _so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector of a rotation matrix [rad]."""
+    c = max(-1.0, min(1.0, (np.trace(R) - 1.0) / 2.0))
+    th = math.acos(c)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if th < 1e-9:
+        return v / 2.0
+    return v * th / (2.0 * math.sin(th))
+
+
+# ---------------------------------------------------------------------- application
+def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.DataFrame:
+    """A copy of ``log`` with the corrections applied before the estimator sees it.
+
+    IMU columns are rotated into the model's trunk frame after removing the biases
+    (``acc_B = R_BI (acc - b_a)``, ``gyro_B = R_BI (gyro - b_g)``, ``R_WB = R_WI R_BI^T``),
+    forces become ``(f - z_i) / k_i``, and ``attrs["robot"]`` gets the corrected mass and
+    trunk CoM. ``attrs["model_corrections"]`` records what was applied. None returns
+    ``log`` unchanged.
+    """
+    if corr is None:
+        return log
+    out = log.copy()
+    R_BI = _rpy_to_R(np.radians(corr.imu_mount_rpy_deg))
+    if all(c in out.columns for c in IMU_ACC):
+        acc = (out[list(IMU_ACC)].to_numpy(float) - np.asarray(corr.acc_bias_m_s2)) @ R_BI.T
+        out[list(IMU_ACC)] = acc
+    if all(c in out.columns for c in IMU_GYRO):
+        gy = (out[list(IMU_GYRO)].to_numpy(float) - np.asarray(corr.gyro_bias_rad_s)) @ R_BI.T
+        out[list(IMU_GYRO)] = gy
+    if all(c in out.columns for c in IMU_QUAT):
+        q = out[list(IMU_QUAT)].to_numpy(float)
+        ok = np.all(np.isfinite(q), axis=1) & (np.linalg.norm(q, axis=1) > 0)
+        qn = q.copy()
+        if ok.any():
+            qc = rotation_to_quat(quat_to_rotation(q[ok]) @ R_BI.T)
+            qn[ok] = qc * np.where(qc[:, :1] < 0, -1.0, 1.0)
+        out[list(IMU_QUAT)] = qn
+    for s in SENSOR_NAMES:
+        c = f"force_{s}"
+        if c in out.columns:
+            out[c] = (out[c].to_numpy(float) - corr.load_cell_zero_n[s]) / corr.load_cell_gain[s]
+    robot = robot_of(log)
+    changes: dict[str, Any] = {"trunk_com_x": corr.trunk_com_x_m, "trunk_com_y": corr.trunk_com_y_m}
+    if corr.mass_kg is not None:
+        changes["mass"] = float(corr.mass_kg)
+    out.attrs = {
+        **log.attrs,
+        "robot": dataclasses.replace(robot, **changes).to_dict(),
+        "model_corrections": corr.to_dict(),
+    }
+    return out

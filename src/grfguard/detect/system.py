@@ -1,0 +1,331 @@
+"""System-level status: blame the model, not the sensors, when all residuals move together.
+
+A model error (mass, attitude, CoM) moves the residuals ``r_i = f_i - v_i`` (measured
+minus virtual force) of every loaded sensor in a pattern fixed by the sole geometry; a
+sensor fault moves one residual. :class:`CommonModeMonitor` fits the common pattern
+
+    r_i ~ alpha v_i + L_f (beta_x x_i + beta_y y_i)
+
+(``x_i, y_i`` the sensor position in its sole frame [m], ``L_f`` the load of its foot
+[N]): ``alpha`` is the relative total-force error (mass or gain scale), ``beta`` a CoP
+shift common to both feet (attitude, CoM) in [1/m] (the CoP moves by
+``beta * I_xx / L`` ...; reported here in cm of CoP shift). The fit uses exponentially
+weighted least squares with a slow time constant (``time_constant_s``, default 10 s) so
+a sudden sensor fault is caught by the per-sensor tests long before the fit could
+absorb it, and it freezes while any sensor is flagged. The fitted pattern is returned as
+``correction_n`` (add it to the virtual forces before the per-sensor tests) together with
+``model_mismatch`` (True when ``|alpha|`` exceeds ``mass_ratio_limit`` or the CoP shift
+exceeds ``cop_shift_limit_m``) and a short ``reason``. The correction is zero unless the
+status is raised (on an exact model the per-sensor tests see the plain virtual forces).
+
+Wiring (see :func:`system_aware_run`): per sample, ``v_i + correction_n[i]`` replaces
+``v_i`` in the per-sensor detector, and ``model_mismatch`` / ``reason`` go to the output
+(``model_mismatch`` column in ``run``, key in ``update()``, a line in the report).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from grfguard._validate import check_number
+from grfguard.model.robot import SURALP, RobotConfig
+
+__all__ = ["CommonModeConfig", "CommonModeMonitor", "CommonModeResult"]
+
+
+@dataclass(frozen=True)
+class CommonModeConfig:
+    """Settings of :class:`CommonModeMonitor`.
+
+    Attributes:
+        time_constant_s: Forgetting time constant of the common-mode fit in [s].
+        warmup_s: Loaded time before the status may be raised in [s].
+        mass_ratio_limit: ``|alpha|`` above which the total force is blamed on the model.
+        cop_shift_limit_m: Common CoP shift above which the attitude/CoM is blamed [m].
+        max_ratio: Bound of ``|alpha|`` used in the correction.
+        max_cop_shift_m: Bound of the CoP shift used in the correction [m].
+        min_load_fraction: A foot enters the fit when its virtual load exceeds this
+            fraction of the weight.
+    """
+
+    time_constant_s: float = 10.0
+    warmup_s: float = 2.0
+    mass_ratio_limit: float = 0.02
+    cop_shift_limit_m: float = 0.01
+    max_ratio: float = 0.15
+    max_cop_shift_m: float = 0.05
+    min_load_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        o = "common_mode"
+        check_number(o, "time_constant_s", self.time_constant_s, 0.1, 3600.0, "s")
+        check_number(o, "warmup_s", self.warmup_s, 0.0, 600.0, "s")
+        check_number(o, "mass_ratio_limit", self.mass_ratio_limit, 0.0, 1.0, "")
+        check_number(o, "cop_shift_limit_m", self.cop_shift_limit_m, 0.0, 0.5, "m")
+        check_number(o, "max_ratio", self.max_ratio, 0.0, 1.0, "")
+        check_number(o, "max_cop_shift_m", self.max_cop_shift_m, 0.0, 0.5, "m")
+        check_number(o, "min_load_fraction", self.min_load_fraction, 0.0, 1.0, "")
+
+
+@dataclass(frozen=True)
+class CommonModeResult:
+    """One step of :class:`CommonModeMonitor`.
+
+    Attributes:
+        correction_n: (8,) common-mode residual to add to the virtual forces [N].
+        model_mismatch: True when the evidence blames the model.
+        reason: Short text (empty when no mismatch), e.g. ``total force off by +5.1 %``.
+        ratio: Relative total-force error ``alpha``.
+        cop_shift_m: (2,) common CoP shift (x, y) in [m].
+    """
+
+    correction_n: np.ndarray
+    model_mismatch: bool
+    reason: str
+    ratio: float
+    cop_shift_m: np.ndarray
+
+
+class CommonModeMonitor:
+    """Fits the residual pattern common to all loaded sensors (model error).
+
+    Args:
+        robot: Robot description (sensor layout, weight).
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(
+        self, robot: RobotConfig = SURALP, dt_s: float = 0.001,
+        config: CommonModeConfig | None = None,
+    ) -> None:
+        self.robot = robot
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else CommonModeConfig()
+        p = robot.sensor_positions_in_foot()
+        self._x = np.concatenate([p[:, 0], p[:, 0]])
+        self._y = np.concatenate([p[:, 1], p[:, 1]])
+        # CoP shift d moves a corner's share by L (d . p_i) / sum(p^2) (4 corners)
+        self._sx = float(np.sum(p[:, 0] ** 2))
+        self._sy = float(np.sum(p[:, 1] ** 2))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the fit."""
+        self._M = np.zeros((3, 3))
+        self._b = np.zeros(3)
+        self._theta = np.zeros(3)
+        self._loaded_s = 0.0
+
+    def update(
+        self,
+        measured: Sequence[float],
+        vfs: Sequence[float],
+        valid_foot: Sequence[bool] = (True, True),
+        frozen: bool = False,
+    ) -> CommonModeResult:
+        """One sample.
+
+        Args:
+            measured: (8,) measured forces [N] (NaN allowed: that sensor is skipped).
+            vfs: (8,) virtual forces [N].
+            valid_foot: Per foot (right, left): the foot is in contact and its virtual
+                forces are valid.
+            frozen: Do not learn from this sample (e.g. a sensor is flagged).
+
+        Returns:
+            The :class:`CommonModeResult` (never raises on bad numbers).
+        """
+        c = self.config
+        m = np.asarray(measured, dtype=float)
+        v = np.asarray(vfs, dtype=float)
+        ok = np.isfinite(m) & np.isfinite(v)
+        loads = np.array([np.nansum(v[:4]), np.nansum(v[4:])])
+        use = np.zeros(8, dtype=bool)
+        for si in range(2):
+            if bool(valid_foot[si]) and loads[si] > c.min_load_fraction * self.robot.weight:
+                use[4 * si : 4 * si + 4] = ok[4 * si : 4 * si + 4]
+        L = np.repeat(loads, 4)
+        phi = np.column_stack(
+            [np.where(ok, v, 0.0), L * self._x / self._sx, L * self._y / self._sy]
+        )
+        if use.any() and not frozen:
+            lam = math.exp(-self.dt_s / c.time_constant_s)
+            P, r = phi[use], (m - v)[use]
+            self._M = lam * self._M + P.T @ P
+            self._b = lam * self._b + P.T @ r
+            self._loaded_s += self.dt_s
+            reg = 1e-6 * (np.trace(self._M) + 1e-9)
+            try:
+                self._theta = np.linalg.solve(self._M + reg * np.eye(3), self._b)
+            except np.linalg.LinAlgError:
+                pass
+        th = self._theta if self._loaded_s >= c.warmup_s else np.zeros(3)
+        ratio = float(np.clip(th[0], -c.max_ratio, c.max_ratio))
+        shift = np.clip(th[1:], -c.max_cop_shift_m, c.max_cop_shift_m)
+        corr = np.where(ok, ratio * v, 0.0) + phi[:, 1] * shift[0] + phi[:, 2] * shift[1]
+        corr = np.where(np.isfinite(corr), corr, 0.0)
+        reasons = []
+        if self._loaded_s >= c.warmup_s:
+            if abs(ratio) > c.mass_ratio_limit:
+                reasons.append(f"total force off by {100 * ratio:+.1f} %")
+            if float(np.hypot(*shift)) > c.cop_shift_limit_m:
+                reasons.append(
+                    f"attitude/CoM inconsistent (CoP shifted {100 * shift[0]:+.1f} cm x, "
+                    f"{100 * shift[1]:+.1f} cm y)"
+                )
+        if not reasons:  # no evidence against the model: leave the virtual forces alone
+            corr = np.zeros(8)
+        return CommonModeResult(corr, bool(reasons), "; ".join(reasons), ratio, shift)
+
+
+# ---------------------------------------------------------------------------- wiring
+class SystemAwareMonitor:
+    """The per-sensor :class:`~grfguard.detect.Monitor` with the system-level status and
+    the standing detector plugged in, without changing the Monitor.
+
+    Per sample: the virtual sensor runs; :class:`CommonModeMonitor` fits the residual
+    pattern common to all sensors and its ``correction_n`` is added to the virtual forces
+    (``vfs_<s>`` and ``vfs_total_<side>``) before the inner Monitor (built with
+    ``vfs=None``, i.e. on precomputed virtual forces) runs its per-sensor tests; the fit
+    freezes while any sensor is flagged. :class:`~grfguard.detect.standing.StandingDetector`
+    runs on the corrected residuals and its flags are OR-ed into ``flag_<s>``.
+
+    Outputs: everything the Monitor returns plus ``model_mismatch`` (bool),
+    ``model_mismatch_reason`` (text) and ``standing_flag_<s>``.
+
+    How to wire this into the Monitor itself (for the lead): in ``Monitor._step`` (or the
+    pipeline's residual stage), right after the virtual forces ``v`` of the sample are
+    known and before the residuals are formed, add::
+
+        cm = self._common.update(x, v, valid_foot, frozen=any(self._flags))
+        v = [vi + ci for vi, ci in zip(v, cm.correction_n)]
+        st_flags, st_kinds = self._standing.update(x, v, cref[0] > 0.5 and cref[1] > 0.5)
+
+    then OR ``st_flags`` into the sensor flags and put ``cm.model_mismatch`` /
+    ``cm.reason`` into the output row; create both objects in ``reset()``.
+
+    Args:
+        config: Monitor settings.
+        robot: Robot description (None: from the log in :meth:`for_log`).
+        vfs: A ``VirtualForceSensor``, or None when the rows carry ``vfs_*`` columns.
+        common: Settings of the common-mode fit.
+        standing: Settings of the standing detector.
+    """
+
+    def __init__(
+        self,
+        config=None,
+        robot: RobotConfig = SURALP,
+        vfs=None,
+        common: CommonModeConfig | None = None,
+        standing=None,
+    ) -> None:
+        from grfguard.detect.monitor import Monitor, MonitorConfig
+        from grfguard.detect.standing import StandingDetector
+
+        self.config = config if config is not None else MonitorConfig()
+        self.vfs = vfs
+        self.inner = Monitor(self.config, vfs=None)
+        self.common = CommonModeMonitor(robot, self.config.dt_s, common)
+        self.standing = StandingDetector(self.config.dt_s, standing)
+        self._last_flags = [False] * 8
+        self._zmp_prev = (math.nan, math.nan)
+
+    @classmethod
+    def for_log(cls, log, config=None, **kwargs) -> SystemAwareMonitor:
+        """Robot and virtual sensor from the log (as :meth:`Monitor.for_log`)."""
+        from grfguard.calib.selfcal import robot_of
+        from grfguard.detect.monitor import Monitor
+
+        base = Monitor.for_log(log, config)
+        return cls(base.config, robot_of(log), base.vfs, **kwargs)
+
+    def reset(self) -> None:
+        """Forget everything."""
+        if self.vfs is not None:
+            self.vfs.reset()
+        self.inner.reset()
+        self.common.reset()
+        self.standing.reset()
+        self._last_flags = [False] * 8
+        self._zmp_prev = (math.nan, math.nan)
+
+    def _process(self, row: dict, vout: dict) -> dict:
+        from grfguard.model.robot import SENSOR_NAMES, SIDES
+
+        src = vout if self.vfs is not None else row
+
+        def f(d, k):
+            try:
+                return float(d.get(k, math.nan))
+            except (TypeError, ValueError):
+                return math.nan
+
+        x = [f(row, f"force_{s}") for s in SENSOR_NAMES]
+        v = [f(src, f"vfs_{s}") for s in SENSOR_NAMES]
+        cref = [f(row, f"contact_ref_{s}") for s in SIDES]
+        cest = [f(src, f"contact_est_{s}") for s in SIDES]
+        valid = [
+            (ce > 0.5) if math.isfinite(ce) else (cr > 0.5) for ce, cr in zip(cest, cref, strict=True)
+        ]
+        cm = self.common.update(x, v, valid, frozen=any(self._last_flags))
+        vc = [vi + float(ci) for vi, ci in zip(v, cm.correction_n, strict=True)]
+        # standing: both feet planned in contact and the ZMP reference at rest
+        zr = (f(row, "zmp_ref_x"), f(row, "zmp_ref_y"))
+        still = not any(
+            math.isfinite(a) and math.isfinite(b) and abs(a - b) > 1e-6
+            for a, b in zip(zr, self._zmp_prev, strict=True)
+        )
+        self._zmp_prev = zr
+        ds = still and all(math.isfinite(c) and c > 0.5 for c in cref)
+        st_flags, st_kinds = self.standing.update(x, vc, ds)
+        inner_row = dict(row)
+        inner_row.update(src)
+        for s, val in zip(SENSOR_NAMES, vc, strict=True):
+            inner_row[f"vfs_{s}"] = val
+        for si, side in enumerate(SIDES):
+            inner_row[f"vfs_total_{side}"] = float(np.nansum(vc[4 * si : 4 * si + 4]))
+        out = dict(vout)
+        out.update(self.inner.update(inner_row))
+        for i, s in enumerate(SENSOR_NAMES):
+            out[f"standing_flag_{s}"] = bool(st_flags[i])
+            if st_flags[i] and not out.get(f"flag_{s}", False):
+                out[f"flag_{s}"] = True
+                out[f"kind_{s}"] = st_kinds[i]
+        self._last_flags = [bool(out.get(f"flag_{s}", False)) for s in SENSOR_NAMES]
+        out["model_mismatch"] = cm.model_mismatch
+        out["model_mismatch_reason"] = cm.reason
+        return out
+
+    def update(self, row) -> dict:
+        """Process one sample (never raises on a bad sample)."""
+        vout = {}
+        if self.vfs is not None:
+            try:
+                vout = self.vfs.update(row)
+            except Exception:  # noqa: BLE001 - a bad sample must never raise
+                vout = {}
+        return self._process(dict(row), vout)
+
+    def run(self, log):
+        """Reset, then process the whole log; ``log`` plus the output columns."""
+        import pandas as pd
+
+        self.reset()
+        vdf = self.vfs.run(log) if self.vfs is not None else None
+        if self.vfs is not None:
+            self.vfs.reset()
+        recs = log.to_dict("records")
+        vrecs = vdf.to_dict("records") if vdf is not None else [{}] * len(recs)
+        rows = [self._process(r, vr) for r, vr in zip(recs, vrecs, strict=True)]
+        res = pd.DataFrame(rows, index=log.index)
+        out = log.copy()
+        for c in res.columns:
+            out[c] = res[c].to_numpy()
+        out.attrs = {**log.attrs, "monitor": self.inner.describe()}
+        return out

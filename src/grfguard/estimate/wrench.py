@@ -1,0 +1,275 @@
+"""Virtual foot wrenches of any described robot from its log: IMU + every joint.
+
+The ground must supply what the whole body's motion and weight need. With the base
+at the origin (a free-floating body's dynamics does not depend on where it is), the
+base attitude from the IMU, the joints from the encoders, and the base velocity from
+the stance foot standing still (``v_B = -sum_i w_i d/dt p_i``, ``p_i`` the sole of foot
+``i`` relative to the base, ``w_i`` the planned stance weights), inverse dynamics gives
+the generalized force ``f = M(q) qdd + c(q, qd)`` (``mj_inverse``, contacts off). Its six
+free-joint rows are the ground's: a wrench ``w_i`` at sole ``i`` alone would need
+``J_i,free^T w_i = f_free``. In single support the stance foot carries all of it; in
+double support the load is shared as the centre of pressure of the total wrench lies
+between the soles.
+
+At an ankle F/T sensor the reading is not the ground wrench: the foot below the sensor
+has weight and inertia. The ground wrench is applied to the foot body
+(``xfrc_applied``) and ``mj_rnePostConstraint`` gives the internal wrench between the
+foot body and its parent, read at the sensor frame as MuJoCo's force/torque sensors
+do; the sign is that of the log (the foot's wrench on the leg, ``fz > 0`` loaded).
+
+Corner load cells get the minimum-norm split of each foot's vertical force and
+moments over its four cells (``f = A^+ (F_z, M_x, M_y)``).
+
+Derivatives: Savitzky-Golay (cubic) over ``window`` seconds, zero lag (offline, batch).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import pandas as pd
+from scipy.signal import savgol_filter
+
+from grfguard.errors import LogFormatError
+from grfguard.model.description import FT_AXES, SIDES
+from grfguard.model.kinematics import quat_to_rotation, rotation_to_quat
+from grfguard.model.loader import LoadedRobot
+
+__all__ = ["WrenchEstimate", "estimate_wrenches", "evaluate_wrenches", "wrench_columns"]
+
+
+@dataclass(frozen=True)
+class WrenchEstimate:
+    """Virtual foot wrenches of a log (T samples).
+
+    Attributes:
+        time: [s], (T,).
+        ground: Ground wrench on each foot at its sole centre, world axes, (2, T, 6):
+            force [N], torque [N m] (right, left).
+        sensor: The log's force channels estimated: ``ft_<s>_<axis>`` (sensor frame,
+            foot on leg) or ``force_<s><k>`` (corner cells, [N]) -> (T,) arrays.
+    """
+
+    time: np.ndarray
+    ground: np.ndarray
+    sensor: dict[str, np.ndarray]
+
+
+def wrench_columns(est: WrenchEstimate) -> pd.DataFrame:
+    """``vfs_<channel>`` columns and per-foot ``vfs_total_<s>`` [N] as a DataFrame."""
+    cols = {f"vfs_{k[3:] if k.startswith('ft_') else k[6:]}": v for k, v in est.sensor.items()}
+    for i, s in enumerate(SIDES):
+        cols[f"vfs_total_{s}"] = est.ground[i, :, 2]
+    return pd.DataFrame(cols)
+
+
+def _deriv(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
+    return savgol_filter(x, win, 3, deriv=order, delta=dt, axis=0, mode="interp")
+
+
+def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1
+                      ) -> WrenchEstimate:
+    """Virtual foot wrenches of ``df`` (module docstring).
+
+    Args:
+        df: A log of ``robot`` (any rate from 100 Hz up); needs ``time``, ``imu_quat_*``,
+            ``imu_gyro_*``, ``q_<joint>`` of every joint; ``contact_ref_r/l`` when
+            present give the stance feet (otherwise the lower sole).
+        robot: The loaded robot.
+        window: Smoothing window of the derivatives [s].
+
+    Returns:
+        The :class:`WrenchEstimate`.
+
+    Raises:
+        LogFormatError: A joint column is missing.
+    """
+    m = robot.model
+    d = mujoco.MjData(m)
+    missing = [f"q_{j}" for j in robot.joint_names if f"q_{j}" not in df.columns]
+    if missing:
+        raise LogFormatError(f"log misses joint column(s) {missing} of robot "
+                             f"{robot.description.name!r}")
+    t = df["time"].to_numpy(float)
+    n = t.size
+    dt = float(np.median(np.diff(t)))
+    win = max(5, int(round(window / dt)) | 1)
+    if win > n:
+        win = n if n % 2 else n - 1
+    q = df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float)
+    qd, qdd = _deriv(q, win, 1, dt), _deriv(q, win, 2, dt)
+    # attitude and rates smoothed over the same window (white attitude noise would
+    # otherwise be differentiated twice through the sole positions)
+    quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
+    quat_I = quat_I * np.where(quat_I[:, :1] < 0, -1.0, 1.0)
+    quat_I = _deriv(quat_I, win, 0, dt)
+    R_WI = quat_to_rotation(quat_I / np.linalg.norm(quat_I, axis=1, keepdims=True))
+    gyro_I = _deriv(df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float), win, 0, dt)
+    jq = robot.qpos_adr(robot.joint_names)
+    jv = robot.dof_adr(robot.joint_names)
+    imu = m.site("imu").id
+    base = m.body(robot.base_body).id
+    sites = [m.site(f"{s}_sole").id for s in SIDES]
+    # pass 1: base attitude, sole positions relative to the base (world axes)
+    qpos = m.qpos0.copy()
+    qpos[:3] = 0.0
+    R_WB = np.empty((n, 3, 3))
+    R_BI = np.empty((n, 3, 3))
+    p_rel = np.empty((2, n, 3))
+    for k in range(n):
+        qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+        qpos[jq] = q[k]
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        R_BI[k] = d.site_xmat[imu].reshape(3, 3)  # IMU in base axes (base at identity)
+        R_WB[k] = R_WI[k] @ R_BI[k].T
+        for i, sid in enumerate(sites):
+            p_rel[i, k] = d.site_xpos[sid]  # sole in base axes (encoders only)
+    quat_B = rotation_to_quat(R_WB)
+    omega_B = np.einsum("tij,tj->ti", R_BI, gyro_I)  # base angular velocity, base axes
+    alpha_B = _deriv(omega_B, win, 1, dt)
+    if {"contact_ref_r", "contact_ref_l"} <= set(df.columns):
+        c = df[["contact_ref_r", "contact_ref_l"]].to_numpy(float)
+    else:
+        z = np.einsum("tj,itj->it", R_WB[:, 2, :], p_rel)  # sole heights below the base
+        c = np.column_stack([z[0] <= z[1], z[1] < z[0]]).astype(float)
+    w = c / np.maximum(c.sum(axis=1, keepdims=True), 1.0)
+    # stance sole still: v_B = -R (w x p + p'), a_B = -R (w x (w x p) + 2 w x p' + a x p + p'')
+    # (base axes; attitude noise is never differentiated)
+    v_loc = np.zeros((n, 3))
+    a_loc = np.zeros((n, 3))
+    for i in range(2):
+        p, pd_, pdd = p_rel[i], _deriv(p_rel[i], win, 1, dt), _deriv(p_rel[i], win, 2, dt)
+        v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
+        a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
+                                  + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
+    v_B = -np.einsum("tij,tj->ti", R_WB, v_loc)
+    a_B = -np.einsum("tij,tj->ti", R_WB, a_loc)
+    # pass 2: inverse dynamics, ground wrench per foot, sensor wrenches
+    ft = robot.description.sensing == "ft"
+    feet_b = [m.body(f.body).id for f in robot.description.feet]
+    ft_sites = [m.site(f"{s}_ft").id for s in SIDES] if ft else []
+    saved = m.opt.disableflags
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    ground = np.zeros((2, n, 6))
+    ft_out = np.zeros((2, n, 6))
+    jac = np.zeros((6, m.nv))
+    try:
+        for k in range(n):
+            d.qpos[:3] = 0.0
+            d.qpos[3:7] = quat_B[k]
+            d.qpos[jq] = q[k]
+            d.qvel[:3], d.qvel[3:6], d.qvel[jv] = v_B[k], omega_B[k], qd[k]
+            d.qacc[:3], d.qacc[3:6], d.qacc[jv] = a_B[k], alpha_B[k], qdd[k]
+            mujoco.mj_inverse(m, d)
+            f_free = d.qfrc_inverse[:6].copy()
+            alone = np.empty((2, 6))
+            for i, sid in enumerate(sites):
+                mujoco.mj_jacSite(m, d, jac[:3], jac[3:], sid)
+                alone[i] = np.linalg.solve(jac[:, :6].T, f_free)
+            share = _share(w[k], alone, d.site_xpos[sites[0]], d.site_xpos[sites[1]])
+            for i in range(2):
+                ground[i, k] = share[i] * alone[i]
+            if ft:
+                d.xfrc_applied[:] = 0.0
+                for i, b in enumerate(feet_b):
+                    F, tau = ground[i, k, :3], ground[i, k, 3:]
+                    d.xfrc_applied[b, :3] = F
+                    d.xfrc_applied[b, 3:] = tau + np.cross(d.site_xpos[sites[i]] - d.xipos[b], F)
+                mujoco.mj_rnePostConstraint(m, d)
+                for i, b in enumerate(feet_b):
+                    tq, fo = d.cfrc_int[b, :3], d.cfrc_int[b, 3:]
+                    p_site = d.site_xpos[ft_sites[i]]
+                    tq_site = tq - np.cross(p_site - d.subtree_com[m.body_rootid[b]], fo)
+                    R = d.site_xmat[ft_sites[i]].reshape(3, 3)
+                    ft_out[i, k, :3] = -(R.T @ fo)
+                    ft_out[i, k, 3:] = -(R.T @ tq_site)
+    finally:
+        m.opt.disableflags = saved
+    sensor: dict[str, np.ndarray] = {}
+    if ft:
+        for i, s in enumerate(SIDES):
+            for a, ax in enumerate(FT_AXES):
+                sensor[f"ft_{s}_{ax}"] = ft_out[i, :, a]
+    else:
+        for i, s in enumerate(SIDES):
+            cells = _corner_split(robot, i, ground[i], R_WB, p_rel[i])
+            for kk in range(4):
+                sensor[f"force_{s}{kk + 1}"] = cells[:, kk]
+    del base
+    return WrenchEstimate(time=t, ground=ground, sensor=sensor)
+
+
+def _share(w: np.ndarray, alone: np.ndarray, p_r: np.ndarray, p_l: np.ndarray) -> np.ndarray:
+    """Load shares of (right, left): the planned stance if one foot, else the CoP of the
+    total wrench projected on the segment between the soles."""
+    if w[0] == 0.0 or w[1] == 0.0:
+        return w
+    F, tau = alone[0, :3], alone[0, 3:]
+    if F[2] < 1e-6:
+        return w
+    # CoP on the sole plane of the total wrench (given at the right sole centre)
+    cop = p_r[:2] + np.array([-tau[1], tau[0]]) / F[2]
+    dv = p_r[:2] - p_l[:2]
+    a = float(np.clip(np.dot(cop - p_l[:2], dv) / np.dot(dv, dv), 0.0, 1.0))
+    return np.array([a, 1.0 - a])
+
+
+def _corner_split(robot: LoadedRobot, i: int, ground: np.ndarray, R_WB: np.ndarray,
+                  p_rel: np.ndarray) -> np.ndarray:
+    """(T, 4) corner forces [N]: minimum-norm split of (F_z, M_x, M_y) at the sole."""
+    foot = robot.description.feet[i]
+    xy = foot.corners_in_sole()
+    # moments about the sole centre in world axes; the foot is flat in stance, the
+    # sole yaw is neglected (straight walking)
+    A = np.vstack([np.ones(4), xy[:, 1], -xy[:, 0]])
+    pinv = np.linalg.pinv(A)
+    rhs = np.column_stack([ground[:, 2], ground[:, 3], ground[:, 4]])
+    return rhs @ pinv.T
+
+
+def evaluate_wrenches(df: pd.DataFrame, est: WrenchEstimate, robot: LoadedRobot,
+                      ss_margin_s: float = 0.05, t_start_s: float = 0.5) -> dict[str, float]:
+    """Single-support accuracy of ``est`` against the truth of a simulated log.
+
+    Single support (as :func:`grfguard.evaluate.vfs_metrics.support_windows`): one foot
+    loaded (true normal force > 1 N), the other not, no contact change within
+    ``ss_margin_s``; errors on the stance foot after ``t_start_s``. Returns RMSEs in %:
+    ``foot_fz`` of the weight m g; ``corner`` (worst corner) of m g; ``ft_f<xyz>`` of
+    m g and ``ft_t<xyz>`` of m g x foot length.
+    """
+    from grfguard.evaluate.vfs_metrics import _dilate
+
+    t = df["time"].to_numpy(float)
+    dt = float(np.median(np.diff(t)))
+    loaded = np.column_stack([df[f"true_grf_{s}_z"].to_numpy(float) > 1.0 for s in SIDES])
+    change = np.zeros(t.size, dtype=bool)
+    change[1:] = np.any(loaded[1:] != loaded[:-1], axis=1)
+    near = _dilate(change, int(round(ss_margin_s / dt)))
+    ok = ~near & (t >= t_start_s)
+    ss = [loaded[:, 0] & ~loaded[:, 1] & ok, loaded[:, 1] & ~loaded[:, 0] & ok]
+    weight = robot.mass * float(-robot.model.opt.gravity[2])
+    foot_len = robot.description.feet[0].length
+    out: dict[str, float] = {"n_ss": float(ss[0].sum() + ss[1].sum())}
+
+    def rmse(errs: list[np.ndarray]) -> float:
+        e = np.concatenate(errs)
+        return float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+
+    out["foot_fz"] = 100 * rmse([
+        est.ground[i, ss[i], 2] - df[f"true_grf_{s}_z"].to_numpy(float)[ss[i]]
+        for i, s in enumerate(SIDES)]) / weight
+    if robot.description.sensing == "ft":
+        for a, ax in enumerate(FT_AXES):
+            scale = weight if a < 3 else weight * foot_len
+            out[f"ft_{ax}"] = 100 * rmse([
+                est.sensor[f"ft_{s}_{ax}"][ss[i]] - df[f"true_ft_{s}_{ax}"].to_numpy(float)[ss[i]]
+                for i, s in enumerate(SIDES)]) / scale
+    else:
+        out["corner"] = np.nanmax([
+            100 * rmse([est.sensor[f"force_{s}{k}"][ss[i]]
+                        - df[f"true_force_{s}{k}"].to_numpy(float)[ss[i]]]) / weight
+            for i, s in enumerate(SIDES) for k in range(1, 5)]).item()
+    return out

@@ -1,0 +1,199 @@
+"""Compiled solver of the sole-compliance corner QP of :mod:`grfguard.estimate.compliance`.
+
+The pure-Python path solves, over the ``k`` corners in contact,
+
+    min_{N >= 0} |rel^T N|^2 + (rho (1^T N - F))^2 + w |N - N_prior|^2
+
+with ``scipy.optimize.nnls`` (``rho = 100``, ``w = qp_weight``) and rescales ``N`` to sum
+to ``F``. The problem is strictly convex (``w > 0``), so its minimiser is unique and any
+exact method finds it: here Lawson-Hanson's active set with every sub-problem solved as
+a correction ``u = N - N_prior`` by a Householder QR of ``[B; sqrt(w) I]`` (``B`` the three
+rows ``rel^T`` and ``rho 1^T``). Working on the correction keeps the rounding relative to
+the (small) correction instead of to the forces, and the multiplier of the sum row is
+taken from the free corners' optimality conditions instead of the ``rho^2``-amplified
+residual. The only difference to ``nnls`` is rounding (tests: a few 1e-12 N).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grfguard.kernels._jit import njit
+
+__all__ = ["RHO", "prior_qp", "MAX_CORNERS"]
+
+#: Weight of the sum row (same as ``grfguard.estimate.compliance._RHO``).
+RHO = 100.0
+#: Largest number of corners a call handles (scratch sizes).
+MAX_CORNERS = 16
+
+
+@njit
+def _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
+    """Least squares on the free corners: ``z[free] = prior + u``; other entries untouched.
+
+    ``M`` ((3 + K) x K) and ``rhs`` (3 + K) are scratch.
+    """
+    k = nfree
+    nr = 3 + k
+    # B p - d  ->  rhs = d - B p
+    g0 = 0.0
+    g1 = 0.0
+    s = 0.0
+    for c in range(k):
+        j = free[c]
+        g0 += rel[j, 0] * prior[j]
+        g1 += rel[j, 1] * prior[j]
+        s += prior[j]
+    # heavy row first (Householder QR of a weighted problem: rows by decreasing weight)
+    rhs[0] = RHO * total - RHO * s
+    rhs[1] = -g0
+    rhs[2] = -g1
+    for r in range(3, nr):
+        rhs[r] = 0.0
+    for c in range(k):
+        j = free[c]
+        M[0, c] = RHO
+        M[1, c] = rel[j, 0]
+        M[2, c] = rel[j, 1]
+        for r in range(3, nr):
+            M[r, c] = 0.0
+        M[3 + c, c] = sw
+    # Householder QR, applied to rhs on the fly
+    for c in range(k):
+        nrm = 0.0
+        for r in range(c, nr):
+            nrm += M[r, c] * M[r, c]
+        nrm = math.sqrt(nrm)
+        if nrm == 0.0:
+            continue
+        alpha = -nrm if M[c, c] >= 0.0 else nrm
+        v0 = M[c, c] - alpha
+        # v = [v0, M[c+1:, c]]; beta = 2 / |v|^2
+        vv = v0 * v0
+        for r in range(c + 1, nr):
+            vv += M[r, c] * M[r, c]
+        if vv == 0.0:
+            continue
+        M[c, c] = v0
+        for cc in range(c + 1, k):
+            d = 0.0
+            for r in range(c, nr):
+                d += M[r, c] * M[r, cc]
+            f = 2.0 * d / vv
+            for r in range(c, nr):
+                M[r, cc] -= f * M[r, c]
+        d = 0.0
+        for r in range(c, nr):
+            d += M[r, c] * rhs[r]
+        f = 2.0 * d / vv
+        for r in range(c, nr):
+            rhs[r] -= f * M[r, c]
+        M[c, c] = alpha
+    # back substitution R u = Q^T rhs
+    for c in range(k - 1, -1, -1):
+        acc = rhs[c]
+        for cc in range(c + 1, k):
+            acc -= M[c, cc] * dots[cc]
+        dots[c] = acc / M[c, c]
+    for c in range(k):
+        j = free[c]
+        z[j] = prior[j] + dots[c]
+
+
+@njit
+def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
+    """Minimiser ``x[:n]`` (not yet rescaled) of the compliance QP over ``n`` corners.
+
+    Args:
+        rel: (n, 2) corner points relative to the ZMP [m].
+        prior: (n,) prior forces [N].
+        total: total vertical force ``F`` [N] (> 0).
+        sw: ``sqrt(qp_weight)``.
+        n: number of corners.
+        x, z: (n,) output / scratch; free, isfree: (n,) int scratch;
+        M, rhs, dots: scratch of :func:`_ls_correction`.
+    """
+    w2 = sw * sw
+    for j in range(n):
+        x[j] = 0.0
+        isfree[j] = 0
+    nfree = 0
+    for _outer in range(3 * n + 3):
+        # gradient of the negative objective at x (multiplier of the sum row from the
+        # free corners' optimality conditions)
+        gx = 0.0
+        gy = 0.0
+        sx = 0.0
+        for j in range(n):
+            gx += rel[j, 0] * x[j]
+            gy += rel[j, 1] * x[j]
+            sx += x[j]
+        if nfree == 0:
+            lam = RHO * (RHO * total - RHO * sx)
+        else:
+            lam = 0.0
+            for c in range(nfree):
+                j = free[c]
+                lam += rel[j, 0] * gx + rel[j, 1] * gy - w2 * (prior[j] - x[j])
+            lam /= nfree
+        best = -1
+        wbest = 0.0
+        scale = abs(lam) + w2 * (abs(total) + 1.0)
+        for j in range(n):
+            if isfree[j] == 0:
+                wj = -(rel[j, 0] * gx + rel[j, 1] * gy) + lam + w2 * (prior[j] - x[j])
+                if wj > 1e-12 * scale and (best < 0 or wj > wbest):
+                    best = j
+                    wbest = wj
+        if best < 0:
+            break
+        isfree[best] = 1
+        free[nfree] = best
+        nfree += 1
+        for _inner in range(3 * n + 3):
+            _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots)
+            ok = True
+            for c in range(nfree):
+                if z[free[c]] <= 0.0:
+                    ok = False
+                    break
+            if ok:
+                for c in range(nfree):
+                    x[free[c]] = z[free[c]]
+                break
+            alpha = 2.0
+            jmin = -1
+            for c in range(nfree):
+                j = free[c]
+                if z[j] <= 0.0:
+                    a = x[j] / (x[j] - z[j])
+                    if a < alpha:
+                        alpha = a
+                        jmin = j
+            for c in range(nfree):
+                j = free[c]
+                x[j] = x[j] + alpha * (z[j] - x[j])
+            # drop the corner that reached zero (and any other at or below zero)
+            keep = 0
+            for c in range(nfree):
+                j = free[c]
+                if j == jmin or x[j] <= 0.0:
+                    x[j] = 0.0
+                    isfree[j] = 0
+                else:
+                    free[keep] = j
+                    keep += 1
+            nfree = keep
+            if nfree == 0:
+                break
+
+
+def new_scratch(n: int = MAX_CORNERS) -> tuple[np.ndarray, ...]:
+    """Scratch arrays ``(x, z, free, isfree, M, rhs, dots)`` for up to ``n`` corners."""
+    return (
+        np.zeros(n), np.zeros(n), np.zeros(n, np.int64), np.zeros(n, np.int64),
+        np.zeros((3 + n, n)), np.zeros(3 + n), np.zeros(n),
+    )

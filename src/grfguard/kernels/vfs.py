@@ -1,0 +1,853 @@
+"""The virtual force sensor as one compiled step over plain arrays.
+
+:func:`vfs_step` processes one sample: attitude filter, forward kinematics of the MuJoCo
+tree (:mod:`grfguard.kernels.fk`), leg odometry, finite-difference rates with the
+angular momentum, the Butterworth low-passes (direct form II transposed, as
+``scipy.signal.lfilter``), Newton-Euler ZMP, kinematic corner contact, the
+sole-compliance prior and the corner QP (:mod:`grfguard.kernels.nnls`), the per-foot
+totals and CoPs. :func:`vfs_run` loops the same step over a log in one compiled call, so
+streaming and batch are identical by construction. Both reproduce
+:class:`grfguard.estimate.vfs.VirtualForceSensor` (``update`` / ``run``) in the same
+operation order; the only differences are the rounding of the corner QP (the reference
+uses ``scipy.optimize.nnls``; tests and BENCHMARKS.md give the measured size).
+
+Supported settings: the default estimator (``com_method="multibody"``,
+``split_method="qp"`` with the compliance prior ``contact_stiffness_per_kg > 0``,
+``zmp_filter="direct"``, ``anchor_attitude_time_constant = 0``), with or without the
+accelerometer, gyro, planned contact, angular momentum, kinematic contact.
+:meth:`VFSKernel.supports` says whether a :class:`VFSConfig` is covered.
+
+Array layouts (one row per sample):
+
+* input (:data:`IN_COLUMNS`, 24): ``q_<joint>`` x12 [rad] in ``JOINT_NAMES`` order,
+  ``imu_quat_w/x/y/z``, ``imu_gyro_x/y/z`` [rad/s], ``imu_acc_x/y/z`` [m/s^2],
+  ``contact_ref_r/l`` (0/1). Columns the log lacks are NaN and switched off by flags.
+* output (:data:`OUT_COLUMNS`, 22): ``VFS_OUTPUT_COLUMNS`` of the pure-Python sensor
+  (``vfs_r1..vfs_l4`` [N], ``com_est_x/y/z`` [m], ``vfs_total_r/l`` [N],
+  ``vfs_cop_r_x/y``, ``vfs_cop_l_x/y`` [m], ``contact_est_r/l``, ``zmp_est_x/y`` [m],
+  ``vfs_valid``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+from scipy.signal import butter, lfilter_zi
+
+from grfguard.errors import ConfigError
+from grfguard.estimate.config import VFSConfig
+from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
+from grfguard.kernels._jit import fma, njit
+from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
+from grfguard.kernels.nnls import prior_qp
+
+__all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch"]
+
+#: Input row layout of :func:`vfs_step`.
+IN_COLUMNS: tuple[str, ...] = (*JOINT_COLUMNS, *IMU_QUAT, *IMU_GYRO, *IMU_ACC, *CONTACT_REF)
+_I_Q, _I_QUAT, _I_GYRO, _I_ACC, _I_REF = 0, 12, 16, 19, 22
+N_IN = 24
+N_OUT = 22
+
+# float parameters (prm)
+_P_DT, _P_KATT, _P_CH, _P_G, _P_MASS, _P_KC, _P_SW = 0, 1, 2, 3, 4, 5, 6
+_P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10, 11, 12
+_P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
+N_PRM = 18
+# int parameters (iprm)
+_IP_TRUNK, _IP_ROOT, _IP_JOINTS, _IP_IMU, _IP_CORNERS, _IP_SOLES = 0, 1, 2, 14, 15, 23
+N_IPRM = 25
+# state layout (fixed part)
+_S_N, _S_ATT_INIT, _S_ATT = 0, 1, 2  # att: 2..5
+_S_ANCHOR, _S_PWA = 6, 7  # p_W_anchor: 7..9
+_S_HI, _S_HC, _S_HN = 10, 19, 28  # histories 3 x 3 each, count
+_S_PREVF, _S_PREVL_OK, _S_PREVL = 29, 30, 31  # prev_L: 31..33
+_S_LP_OK, _S_FUSE_OK, _S_ACC_OK = 34, 35, 36
+_S_LAST, _S_HAS_LAST = 37, 59  # last output 37..58
+_S_FIXED = 60
+
+
+def _state_size(nbr: int, order: int) -> int:
+    return _S_FIXED + 15 * order + 12 * nbr
+
+
+@njit
+def _qmul(aw, ax, ay, az, bw, bx, by, bz):
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+@njit
+def _qexp(x, y, z):
+    th = math.sqrt(x * x + y * y + z * z)
+    if th < 1e-12:
+        return 1.0, 0.5 * x, 0.5 * y, 0.5 * z
+    s = math.sin(0.5 * th) / th
+    return math.cos(0.5 * th), s * x, s * y, s * z
+
+
+@njit
+def _lfilter_step(b, a, zst, x, y, zi, init):
+    """One DF2T step of every channel; ``zst`` (order, nch) state; ``init`` primes it."""
+    order = b.shape[0] - 1
+    nch = x.shape[0]
+    if init:
+        for k in range(order):
+            for c in range(nch):
+                zst[k, c] = zi[k] * x[c]
+    for c in range(nch):
+        xn = x[c]
+        yn = zst[0, c] + b[0] * xn
+        for k in range(order - 1):
+            zst[k, c] = zst[k + 1, c] + xn * b[k + 1] - yn * a[k + 1]
+        zst[order - 1, c] = xn * b[order] - yn * a[order]
+        y[c] = yn
+
+
+@njit
+def _sum8(a):
+    # numpy's pairwise sum of a contiguous 8-vector
+    return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
+
+
+@njit
+def _sum_seq(a, n):
+    s = a[0]
+    for i in range(1, n):
+        s += a[i]
+    return s
+
+
+@njit
+def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
+             tree, sites, ws, iws):
+    """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
+
+    ``state`` is updated in place (only for a valid sample). ``prm``, ``iprm``,
+    ``body_inertia``, ``corner_radius``, ``filt_*``, ``tree`` and ``sites`` are the
+    constants built by :class:`VFSKernel`; ``ws``/``iws`` are float/int scratch.
+    Returns True for a valid sample.
+    """
+    (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
+     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0) = tree
+    site_body, site_sameframe, site_pos, site_quat = sites
+    nb = body_parent.shape[0]
+    nbr = nb - 1
+    nq = qpos0.shape[0]
+    order = filt_b.shape[1] - 1
+    dt = prm[_P_DT]
+    g = prm[_P_G]
+    use_acc = prm[_P_USE_ACC] != 0.0
+    has_gyro = prm[_P_HAS_GYRO] != 0.0
+    has_ref = prm[_P_HAS_REF] != 0.0
+    # ------------------------------------------------------------ validity
+    ok = True
+    for i in range(16):
+        if not math.isfinite(x[i]):
+            ok = False
+    if has_gyro:
+        for i in range(_I_GYRO, _I_GYRO + 3):
+            if not math.isfinite(x[i]):
+                ok = False
+    if use_acc:
+        for i in range(_I_ACC, _I_ACC + 3):
+            if not math.isfinite(x[i]):
+                ok = False
+    if has_ref:
+        for i in range(_I_REF, _I_REF + 2):
+            if not math.isfinite(x[i]):
+                ok = False
+    if ok:
+        qw, qx, qy, qz = x[12], x[13], x[14], x[15]
+        if math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) < 1e-6:
+            ok = False
+    if not ok:
+        if state[_S_HAS_LAST] != 0.0:
+            for k in range(N_OUT):
+                y[k] = state[_S_LAST + k]
+        else:
+            for k in range(N_OUT):
+                y[k] = np.nan
+        y[N_OUT - 1] = 0.0
+        return False
+    # ------------------------------------------------------------ scratch views
+    o = 0
+    qpos = ws[o : o + nq]
+    o += nq
+    xpos = ws[o : o + 3 * nb].reshape((nb, 3))
+    o += 3 * nb
+    xquat = ws[o : o + 4 * nb].reshape((nb, 4))
+    o += 4 * nb
+    xmat = ws[o : o + 9 * nb].reshape((nb, 9))
+    o += 9 * nb
+    xipos = ws[o : o + 3 * nb].reshape((nb, 3))
+    o += 3 * nb
+    ximat = ws[o : o + 9 * nb].reshape((nb, 9))
+    o += 9 * nb
+    stc = ws[o : o + 3 * nb].reshape((nb, 3))
+    o += 3 * nb
+    msub = ws[o : o + nb]
+    o += nb
+    sxp = ws[o : o + 33].reshape((11, 3))
+    o += 33
+    sxm = ws[o : o + 99].reshape((11, 9))
+    o += 99
+    qin = ws[o : o + nq]
+    o += nq
+    raw = ws[o : o + 9]
+    o += 9
+    main = ws[o : o + 9]
+    o += 9
+    v3a = ws[o : o + 3]
+    o += 3
+    v3b = ws[o : o + 3]
+    o += 3
+    v3c = ws[o : o + 3]
+    o += 3
+    v3d = ws[o : o + 3]
+    o += 3
+    pk = ws[o : o + 24].reshape((8, 3))
+    o += 24
+    tmp8 = ws[o : o + 8]
+    o += 8
+    prior8 = ws[o : o + 8]
+    o += 8
+    rel8 = ws[o : o + 16].reshape((8, 2))
+    o += 16
+    forces = ws[o : o + 8]
+    o += 8
+    lin = ws[o : o + 3]
+    o += 3
+    cc = ws[o : o + 3]
+    o += 3
+    qp_x = ws[o : o + 8]
+    o += 8
+    qp_z = ws[o : o + 8]
+    o += 8
+    qp_M = ws[o : o + 88].reshape((11, 8))
+    o += 88
+    qp_rhs = ws[o : o + 11]
+    o += 11
+    qp_dots = ws[o : o + 8]
+    o += 8
+    ctc = iws[0:8]
+    qp_free = iws[8:16]
+    qp_isfree = iws[16:24]
+    cidx = iws[24:32]
+    # ------------------------------------------------------------ attitude filter
+    nm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    mw, mx, my, mz = qw / nm, qx / nm, qy / nm, qz / nm
+    katt = prm[_P_KATT]
+    if state[_S_ATT_INIT] == 0.0 or katt >= 1.0 or not has_gyro:
+        aw, ax, ay, az = mw, mx, my, mz
+    else:
+        gx = x[_I_GYRO] * dt
+        gy = x[_I_GYRO + 1] * dt
+        gz = x[_I_GYRO + 2] * dt
+        e0, e1, e2, e3 = _qexp(gx, gy, gz)
+        pw, px, py, pz = _qmul(state[_S_ATT], state[_S_ATT + 1], state[_S_ATT + 2],
+                               state[_S_ATT + 3], e0, e1, e2, e3)
+        f0, f1, f2, f3 = _qmul(pw, -px, -py, -pz, mw, mx, my, mz)
+        sgn = 2.0 * katt if f0 >= 0 else -2.0 * katt
+        e0, e1, e2, e3 = _qexp(sgn * f1, sgn * f2, sgn * f3)
+        pw, px, py, pz = _qmul(pw, px, py, pz, e0, e1, e2, e3)
+        n2 = math.sqrt(pw * pw + px * px + py * py + pz * pz)
+        aw, ax, ay, az = pw / n2, px / n2, py / n2, pz / n2
+    state[_S_ATT_INIT] = 1.0
+    state[_S_ATT] = aw
+    state[_S_ATT + 1] = ax
+    state[_S_ATT + 2] = ay
+    state[_S_ATT + 3] = az
+    # ------------------------------------------------------------ kinematics
+    qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
+    tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
+    nt = math.sqrt(tw * tw + tx * tx + ty * ty + tz * tz)
+    if nt < 1e-15:
+        tw, tx, ty, tz = 1.0, 0.0, 0.0, 0.0
+    elif abs(nt - 1.0) > 1e-15:
+        inv = 1.0 / nt
+        tw, tx, ty, tz = tw * inv, tx * inv, ty * inv, tz * inv
+    qin[:] = qpos0
+    r = iprm[_IP_ROOT]
+    qin[r] = 0.0
+    qin[r + 1] = 0.0
+    qin[r + 2] = 0.0
+    qin[r + 3] = tw
+    qin[r + 4] = tx
+    qin[r + 5] = ty
+    qin[r + 6] = tz
+    for j in range(12):
+        qin[iprm[_IP_JOINTS + j]] = x[j]
+    fk_tree(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
+            body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
+            qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, ws[o : o + 27])
+    sel = iws[32:43]
+    sel[0] = iprm[_IP_IMU]
+    for k in range(8):
+        sel[1 + k] = iprm[_IP_CORNERS + k]
+    sel[9] = iprm[_IP_SOLES]
+    sel[10] = iprm[_IP_SOLES + 1]
+    fk_sites(sel, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
+             ximat, sxp, sxm, ws[o : o + 7])
+    trunk = iprm[_IP_TRUNK]
+    p_AC0, p_AC1, p_AC2 = stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
+    for k in range(8):
+        pk[k, 0] = sxp[1 + k, 0]
+        pk[k, 1] = sxp[1 + k, 1]
+        pk[k, 2] = sxp[1 + k, 2] - corner_radius[k]
+    # ------------------------------------------------------------ stance
+    if has_ref:
+        st0 = x[_I_REF] > 0.5
+        st1 = x[_I_REF + 1] > 0.5
+    else:
+        zr = min(pk[0, 2], pk[1, 2], pk[2, 2], pk[3, 2])
+        zl = min(pk[4, 2], pk[5, 2], pk[6, 2], pk[7, 2])
+        zmin = min(zr, zl)
+        st0 = zr - zmin < 0.01
+        st1 = zl - zmin < 0.01
+    # ------------------------------------------------------------ leg odometry (no anchor
+    # attitude: the rotation correction is the identity)
+    if state[_S_ANCHOR] < 0:
+        if st0 and not st1:
+            anc = 0
+        elif st1 and not st0:
+            anc = 1
+        else:
+            zr = min(pk[0, 2], pk[1, 2], pk[2, 2], pk[3, 2])
+            zl = min(pk[4, 2], pk[5, 2], pk[6, 2], pk[7, 2])
+            anc = 1 if zl < zr - 1e-4 else 0
+        if st0 and st1:
+            mid0 = (sxp[9, 0] + sxp[10, 0]) / 2
+            mid1 = (sxp[9, 1] + sxp[10, 1]) / 2
+        else:
+            f = 0 if st0 else (1 if st1 else anc)
+            mid0 = sxp[9 + f, 0] / 1
+            mid1 = sxp[9 + f, 1] / 1
+        z0 = min(pk[4 * anc, 2], pk[4 * anc + 1, 2], pk[4 * anc + 2, 2], pk[4 * anc + 3, 2])
+        state[_S_PWA] = -mid0 + sxp[9 + anc, 0]
+        state[_S_PWA + 1] = -mid1 + sxp[9 + anc, 1]
+        state[_S_PWA + 2] = -z0 + sxp[9 + anc, 2]
+        state[_S_ANCHOR] = anc
+    a_ = int(state[_S_ANCHOR])
+    pwt0 = state[_S_PWA] - sxp[9 + a_, 0]
+    pwt1 = state[_S_PWA + 1] - sxp[9 + a_, 1]
+    pwt2 = state[_S_PWA + 2] - sxp[9 + a_, 2]
+    for k in range(8):
+        tmp8[k] = pwt2 + pk[k, 2]
+    ground = min(tmp8[4 * a_], tmp8[4 * a_ + 1], tmp8[4 * a_ + 2], tmp8[4 * a_ + 3])
+    ob = 1 - a_
+    flat = (max(tmp8[4 * ob], tmp8[4 * ob + 1], tmp8[4 * ob + 2], tmp8[4 * ob + 3]) - ground
+            < prm[_P_CH])
+    st_a = st0 if a_ == 0 else st1
+    st_o = st1 if a_ == 0 else st0
+    if st_o and (flat or not st_a):
+        state[_S_ANCHOR] = ob
+        state[_S_PWA] = pwt0 + sxp[9 + ob, 0]
+        state[_S_PWA + 1] = pwt1 + sxp[9 + ob, 1]
+        state[_S_PWA + 2] = pwt2 + sxp[9 + ob, 2]
+    com0 = pwt0 + p_AC0
+    com1 = pwt1 + p_AC1
+    com2 = pwt2 + p_AC2
+    # ------------------------------------------------------------ raw rates
+    for k in range(9):
+        raw[k] = 0.0
+    hn = int(state[_S_HN])
+    if hn == 3:
+        for k in range(6):
+            state[_S_HI + k] = state[_S_HI + 3 + k]
+            state[_S_HC + k] = state[_S_HC + 3 + k]
+        hn = 2
+    state[_S_HI + 3 * hn] = pwt0 + sxp[0, 0]
+    state[_S_HI + 3 * hn + 1] = pwt1 + sxp[0, 1]
+    state[_S_HI + 3 * hn + 2] = pwt2 + sxp[0, 2]
+    state[_S_HC + 3 * hn] = p_AC0 - sxp[0, 0]
+    state[_S_HC + 3 * hn + 1] = p_AC1 - sxp[0, 1]
+    state[_S_HC + 3 * hn + 2] = p_AC2 - sxp[0, 2]
+    hn += 1
+    state[_S_HN] = hn
+    if hn == 3:
+        for k in range(3):
+            for off, h in ((0, _S_HC), (6, _S_HI)):
+                v1 = (state[h + 6 + k] - state[h + 3 + k]) / dt
+                v0 = (state[h + 3 + k] - state[h + k]) / dt
+                raw[off + k] = (v1 - v0) / dt
+    # angular momentum about the CoM from this and the previous body poses
+    pb = state[_S_FIXED + 15 * order : _S_FIXED + 15 * order + 3 * nbr].reshape((nbr, 3))
+    pr = state[_S_FIXED + 15 * order + 3 * nbr : _S_FIXED + 15 * order + 12 * nbr].reshape(
+        (nbr, 9)
+    )
+    if state[_S_PREVF] != 0.0:
+        msum = prm[_P_BODY_MASS_SUM]
+        for k in range(3):
+            s = xipos[1, k] * body_mass[1]
+            for i in range(2, nb):
+                s += xipos[i, k] * body_mass[i]
+            cc[k] = s / msum
+        for k in range(3):
+            lin[k] = 0.0
+        L0 = 0.0
+        L1 = 0.0
+        L2 = 0.0
+        for i in range(nbr):
+            bi = i + 1
+            m_i = body_mass[bi]
+            r0 = xipos[bi, 0] - cc[0]
+            r1 = xipos[bi, 1] - cc[1]
+            r2 = xipos[bi, 2] - cc[2]
+            w0 = (xipos[bi, 0] - pb[i, 0]) / dt
+            w1 = (xipos[bi, 1] - pb[i, 1]) / dt
+            w2 = (xipos[bi, 2] - pb[i, 2]) / dt
+            c0 = (r1 * w2 - r2 * w1) * m_i
+            c1 = (r2 * w0 - r0 * w2) * m_i
+            c2 = (r0 * w1 - r1 * w0) * m_i
+            if i == 0:
+                lin[0], lin[1], lin[2] = c0, c1, c2
+            else:
+                lin[0] += c0
+                lin[1] += c1
+                lin[2] += c2
+            R = ximat[bi]
+            P = pr[i]
+            # dR = R P^T as numpy's stacked matmul computes it (fused multiply-adds)
+            d01 = fma(R[2], P[5], fma(R[1], P[4], R[0] * P[3]))
+            d02 = fma(R[2], P[8], fma(R[1], P[7], R[0] * P[6]))
+            d10 = fma(R[5], P[2], fma(R[4], P[1], R[3] * P[0]))
+            d12 = fma(R[5], P[8], fma(R[4], P[7], R[3] * P[6]))
+            d20 = fma(R[8], P[2], fma(R[7], P[1], R[6] * P[0]))
+            d21 = fma(R[8], P[5], fma(R[7], P[4], R[6] * P[3]))
+            om0 = (d21 - d12) / (2.0 * dt)
+            om1 = (d02 - d20) / (2.0 * dt)
+            om2 = (d10 - d01) / (2.0 * dt)
+            # w_B = R^T w, scaled by the inertia, rotated back
+            wb0 = (R[0] * om0 + R[3] * om1 + R[6] * om2) * body_inertia[i, 0]
+            wb1 = (R[1] * om0 + R[4] * om1 + R[7] * om2) * body_inertia[i, 1]
+            wb2 = (R[2] * om0 + R[5] * om1 + R[8] * om2) * body_inertia[i, 2]
+            # (einsum's summation order: first + last, then the middle term)
+            t0 = (R[0] * wb0 + R[2] * wb2) + R[1] * wb1
+            t1 = (R[3] * wb0 + R[5] * wb2) + R[4] * wb1
+            t2 = (R[6] * wb0 + R[8] * wb2) + R[7] * wb1
+            if i == 0:
+                L0, L1, L2 = t0, t1, t2
+            else:
+                L0 += t0
+                L1 += t1
+                L2 += t2
+        L0 = lin[0] + L0
+        L1 = lin[1] + L1
+        L2 = lin[2] + L2
+        if state[_S_PREVL_OK] != 0.0:
+            raw[3] = (L0 - state[_S_PREVL]) / dt
+            raw[4] = (L1 - state[_S_PREVL + 1]) / dt
+            raw[5] = (L2 - state[_S_PREVL + 2]) / dt
+        state[_S_PREVL] = L0
+        state[_S_PREVL + 1] = L1
+        state[_S_PREVL + 2] = L2
+        state[_S_PREVL_OK] = 1.0
+    for i in range(nbr):
+        for k in range(3):
+            pb[i, k] = xipos[i + 1, k]
+        for k in range(9):
+            pr[i, k] = ximat[i + 1, k]
+    state[_S_PREVF] = 1.0
+    # ------------------------------------------------------------ filters
+    zo = _S_FIXED
+    zlp = state[zo : zo + 9 * order].reshape((order, 9))
+    zfu = state[zo + 9 * order : zo + 12 * order].reshape((order, 3))
+    zac = state[zo + 12 * order : zo + 15 * order].reshape((order, 3))
+    _lfilter_step(filt_b[0], filt_a[0], zlp, raw, main, filt_zi[0], state[_S_LP_OK] == 0.0)
+    state[_S_LP_OK] = 1.0
+    if use_acc:
+        # acc_W = R(q_att) acc - g e_z  (R from the normalised attitude, numpy's formula)
+        n3 = math.sqrt(aw * aw + ax * ax + ay * ay + az * az)
+        w_, x_, y_, z_ = aw / n3, ax / n3, ay / n3, az / n3
+        r00 = 1 - 2 * (y_ * y_ + z_ * z_)
+        r01 = 2 * (x_ * y_ - w_ * z_)
+        r02 = 2 * (x_ * z_ + w_ * y_)
+        r10 = 2 * (x_ * y_ + w_ * z_)
+        r11 = 1 - 2 * (x_ * x_ + z_ * z_)
+        r12 = 2 * (y_ * z_ - w_ * x_)
+        r20 = 2 * (x_ * z_ - w_ * y_)
+        r21 = 2 * (y_ * z_ + w_ * x_)
+        r22 = 1 - 2 * (x_ * x_ + y_ * y_)
+        a0, a1, a2 = x[_I_ACC], x[_I_ACC + 1], x[_I_ACC + 2]
+        # (einsum's summation order: first + last, then the middle term)
+        v3a[0] = ((r00 * a0 + r02 * a2) + r01 * a1) - 0.0
+        v3a[1] = ((r10 * a0 + r12 * a2) + r11 * a1) - 0.0
+        v3a[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
+        for k in range(3):
+            v3b[k] = raw[6 + k] - v3a[k]
+        _lfilter_step(filt_b[2], filt_a[2], zac, v3a, v3c, filt_zi[2], state[_S_ACC_OK] == 0.0)
+        _lfilter_step(filt_b[1], filt_a[1], zfu, v3b, v3d, filt_zi[1],
+                      state[_S_FUSE_OK] == 0.0)
+        state[_S_ACC_OK] = 1.0
+        state[_S_FUSE_OK] = 1.0
+        cdd0 = (v3c[0] + v3d[0]) + main[0]
+        cdd1 = (v3c[1] + v3d[1]) + main[1]
+        cdd2 = (v3c[2] + v3d[2]) + main[2]
+        if prm[_P_ACC_VERT] == 0.0:
+            cdd2 = main[2] + main[8]
+    else:
+        cdd0 = main[0] + main[6]
+        cdd1 = main[1] + main[7]
+        cdd2 = main[2] + main[8]
+    if prm[_P_USE_L] != 0.0:
+        ld0, ld1 = main[3], main[4]
+    else:
+        ld0, ld1 = 0.0, 0.0
+    mass = prm[_P_MASS]
+    F0 = mass * (cdd0 + 0.0)
+    F1 = mass * (cdd1 + 0.0)
+    F2 = mass * (cdd2 + g)
+    # ------------------------------------------------------------ ZMP (Newton-Euler)
+    h = com2 - ground
+    fz = max(F2, 1.0)
+    zmp0 = com0 - (h * F0 + ld1) / fz
+    zmp1 = com1 - (h * F1 - ld0) / fz
+    # ------------------------------------------------------------ corner contact
+    ch = prm[_P_CH]
+    for k in range(8):
+        pk[k, 0] = pwt0 + pk[k, 0]
+        pk[k, 1] = pwt1 + pk[k, 1]
+        pk[k, 2] = pwt2 + pk[k, 2]
+        tmp8[k] = pk[k, 2] - ground
+    hr = min(tmp8[0], tmp8[1], tmp8[2], tmp8[3])
+    hl = min(tmp8[4], tmp8[5], tmp8[6], tmp8[7])
+    s0, s1 = st0, st1
+    if not (s0 or s1):
+        if hl < hr:
+            s1 = True
+        else:
+            s0 = True
+    kin = prm[_P_KIN] != 0.0
+    for k in range(8):
+        foot = s0 if k < 4 else s1
+        if not kin:
+            ctc[k] = 1 if foot else 0
+        else:
+            hm = hr if k < 4 else hl
+            low = tmp8[k] < ch
+            ctc[k] = 1 if (low or (foot and not (hm < ch) and tmp8[k] == hm)) else 0
+    # ------------------------------------------------------------ compliance prior + QP
+    cnt = 0
+    for k in range(8):
+        cnt += ctc[k]
+    safe = max(cnt, 1)
+    for k in range(8):
+        qp_z[k] = pk[k, 2] if ctc[k] else 0.0
+    zbar = _sum8(qp_z) / safe
+    kc = prm[_P_KC]
+    for k in range(8):
+        prior8[k] = (F2 / safe + kc * (zbar - pk[k, 2])) if ctc[k] else 0.0
+        rel8[k, 0] = pk[k, 0] - zmp0
+        rel8[k, 1] = pk[k, 1] - zmp1
+    m = 0
+    for k in range(8):
+        if ctc[k]:
+            cidx[m] = k
+            m += 1
+    fin = math.isfinite(F2)
+    for c in range(m):
+        j = cidx[c]
+        if not (math.isfinite(rel8[j, 0]) and math.isfinite(rel8[j, 1])
+                and math.isfinite(prior8[j])):
+            fin = False
+    for k in range(8):
+        forces[k] = 0.0
+    if not fin:
+        for k in range(8):
+            forces[k] = np.nan
+    elif m > 0 and F2 > 0.0:
+        # compact copies for the solver
+        for c in range(m):
+            tmp8[c] = prior8[cidx[c]]
+        relc = ws[o : o + 2 * m].reshape((m, 2))
+        for c in range(m):
+            relc[c, 0] = rel8[cidx[c], 0]
+            relc[c, 1] = rel8[cidx[c], 1]
+        prior_qp(relc, tmp8, F2, prm[_P_SW], m, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
+                 qp_dots)
+        if m == 8:
+            sx = _sum8(qp_x)
+        else:
+            sx = _sum_seq(qp_x, m)
+        if sx > 0:
+            f = F2 / sx
+            for c in range(m):
+                qp_x[c] = qp_x[c] * f
+        for c in range(m):
+            forces[cidx[c]] = qp_x[c]
+    # ------------------------------------------------------------ outputs
+    for k in range(8):
+        y[k] = forces[k]
+    y[8] = com0
+    y[9] = com1
+    y[10] = com2
+    for side in range(2):
+        b = 4 * side
+        tot = ((forces[b] + forces[b + 1]) + forces[b + 2]) + forces[b + 3]
+        y[11 + side] = tot
+        if tot >= 1.0:
+            cx = (((forces[b] * pk[b, 0] + forces[b + 1] * pk[b + 1, 0])
+                   + forces[b + 2] * pk[b + 2, 0]) + forces[b + 3] * pk[b + 3, 0])
+            cy = (((forces[b] * pk[b, 1] + forces[b + 1] * pk[b + 1, 1])
+                   + forces[b + 2] * pk[b + 2, 1]) + forces[b + 3] * pk[b + 3, 1])
+            y[13 + 2 * side] = cx / tot
+            y[14 + 2 * side] = cy / tot
+        else:
+            y[13 + 2 * side] = np.nan
+            y[14 + 2 * side] = np.nan
+    y[17] = 1.0 if (ctc[0] or ctc[1] or ctc[2] or ctc[3]) else 0.0
+    y[18] = 1.0 if (ctc[4] or ctc[5] or ctc[6] or ctc[7]) else 0.0
+    y[19] = zmp0
+    y[20] = zmp1
+    y[21] = 1.0
+    for k in range(N_OUT):
+        state[_S_LAST + k] = y[k]
+    state[_S_HAS_LAST] = 1.0
+    state[_S_N] += 1.0
+    return True
+
+
+@njit
+def vfs_run(X, Y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree,
+            sites, ws, iws):
+    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
+    number of valid samples."""
+    n = 0
+    for t in range(X.shape[0]):
+        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                    filt_zi, tree, sites, ws, iws):
+            n += 1
+    return n
+
+
+class VFSKernel:
+    """Constants, state and scratch of the compiled virtual force sensor.
+
+    Args:
+        vfs: A :class:`grfguard.estimate.vfs.VirtualForceSensor` (robot, settings and its
+            MuJoCo model are taken from it).
+        has_gyro: The input carries the gyro (else the logged attitude is used as is).
+        has_ref: The input carries the planned contact (else the lowest-foot fallback).
+
+    Raises:
+        ConfigError: The settings are not covered (see :meth:`supports`).
+    """
+
+    def __init__(self, vfs, has_gyro: bool = True, has_ref: bool = True) -> None:
+        cfg: VFSConfig = vfs.config
+        why = self.unsupported(cfg)
+        if why:
+            raise ConfigError(f"the compiled virtual force sensor does not support {why}; "
+                              "use grfguard.estimate.vfs.VirtualForceSensor")
+        kin = vfs.kin
+        self.config = cfg
+        self.tree = TreeModel.from_mujoco(kin.model)
+        tm = self.tree
+        self.tree_arrays = tm.arrays()
+        self.site_arrays = (tm.site_body, tm.site_sameframe, tm.site_pos, tm.site_quat)
+        prm = np.zeros(N_PRM)
+        prm[_P_DT] = cfg.dt
+        prm[_P_KATT] = (cfg.dt / (cfg.attitude_time_constant + cfg.dt)
+                        if cfg.attitude_time_constant > 0 else 1.0)
+        prm[_P_CH] = cfg.contact_height
+        prm[_P_G] = vfs.g
+        prm[_P_MASS] = vfs.mass
+        prm[_P_KC] = vfs.contact_stiffness
+        prm[_P_SW] = math.sqrt(cfg.qp_weight)
+        prm[_P_USE_ACC] = float(cfg.use_accelerometer)
+        prm[_P_ACC_VERT] = float(cfg.accelerometer_vertical)
+        prm[_P_USE_L] = float(cfg.use_angular_momentum)
+        prm[_P_KIN] = float(cfg.kinematic_contact)
+        prm[_P_HAS_GYRO] = float(has_gyro)
+        prm[_P_HAS_REF] = float(has_ref)
+        prm[_P_BODY_MASS_SUM] = float(kin.body_mass.sum())
+        prm[_P_QIT : _P_QIT + 4] = kin._q_IT
+        self.prm = prm
+        ip = np.zeros(N_IPRM, np.int64)
+        ip[_IP_TRUNK] = kin.trunk_id
+        ip[_IP_ROOT] = kin.root_qadr
+        ip[_IP_JOINTS : _IP_JOINTS + 12] = kin.joint_qadr
+        ip[_IP_IMU] = kin.imu_site
+        ip[_IP_CORNERS : _IP_CORNERS + 8] = kin.corner_sites
+        ip[_IP_SOLES : _IP_SOLES + 2] = kin.sole_sites
+        self.iprm = ip
+        self.body_inertia = np.ascontiguousarray(kin.body_inertia, dtype=float)
+        self.corner_radius = np.ascontiguousarray(kin.corner_radius, dtype=float)
+        bs, as_, zs = [], [], []
+        for cut in (cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff):
+            b, a = butter(cfg.filter_order, cut, btype="low", fs=1.0 / cfg.dt)
+            b, a = np.asarray(b, float), np.asarray(a, float)
+            bs.append(b)
+            as_.append(a)
+            zs.append(lfilter_zi(b, a))
+        self.filt_b = np.ascontiguousarray(np.stack(bs))
+        self.filt_a = np.ascontiguousarray(np.stack(as_))
+        self.filt_zi = np.ascontiguousarray(np.stack(zs))
+        self.order = cfg.filter_order
+        nb = tm.nbody
+        self.state = np.zeros(_state_size(nb - 1, self.order))
+        self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
+        self.iws = np.zeros(64, np.int64)
+        self.reset()
+
+    @staticmethod
+    def unsupported(cfg: VFSConfig) -> str:
+        """Empty when ``cfg`` is covered, else which setting is not."""
+        if cfg.com_method != "multibody":
+            return f"com_method={cfg.com_method!r}"
+        if cfg.split_method != "qp":
+            return f"split_method={cfg.split_method!r}"
+        if cfg.zmp_filter != "direct":
+            return f"zmp_filter={cfg.zmp_filter!r}"
+        if cfg.anchor_attitude_time_constant != 0.0:
+            return "anchor_attitude_time_constant > 0"
+        if cfg.contact_stiffness_per_kg <= 0.0:
+            return "contact_stiffness_per_kg = 0 (rigid corner QP)"
+        return ""
+
+    @classmethod
+    def supports(cls, cfg: VFSConfig) -> bool:
+        """Whether :class:`VFSKernel` covers these settings."""
+        return not cls.unsupported(cfg)
+
+    def reset(self) -> None:
+        """Forget all state (as ``VirtualForceSensor.reset``)."""
+        self.state[:] = 0.0
+        self.state[_S_ANCHOR] = -1.0
+
+    def _args(self) -> tuple:
+        return (self.state, self.prm, self.iprm, self.body_inertia, self.corner_radius,
+                self.filt_b, self.filt_a, self.filt_zi, self.tree_arrays, self.site_arrays,
+                self.ws, self.iws)
+
+    def step(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample: input row (24,) -> output row (22,) (``y`` is filled if given)."""
+        if y is None:
+            y = np.empty(N_OUT)
+        vfs_step(x, y, *self._args())
+        return y
+
+    def run(self, X: np.ndarray) -> np.ndarray:
+        """Reset, then every row of ``X`` (T, 24) -> (T, 22)."""
+        self.reset()
+        X = np.ascontiguousarray(X, dtype=float)
+        Y = np.empty((X.shape[0], N_OUT))
+        vfs_run(X, Y, *self._args())
+        return Y
+
+
+#: Output columns (same names and order as ``VFS_OUTPUT_COLUMNS``).
+def _out_columns() -> tuple[str, ...]:
+    from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
+
+    return tuple(VFS_OUTPUT_COLUMNS)
+
+
+OUT_COLUMNS: tuple[str, ...] = _out_columns()
+
+
+def log_to_array(log: pd.DataFrame | Mapping[str, np.ndarray]) -> tuple[np.ndarray, bool, bool]:
+    """Input array (T, 24) from a log, and whether it has the gyro and the planned contact."""
+    cols = log.columns if isinstance(log, pd.DataFrame) else list(log)
+    n = len(log) if isinstance(log, pd.DataFrame) else len(next(iter(log.values())))
+    X = np.full((n, N_IN), np.nan)
+    for i, c in enumerate(IN_COLUMNS):
+        if c in cols:
+            X[:, i] = np.asarray(log[c], dtype=float)
+    has_gyro = all(c in cols for c in IMU_GYRO)
+    has_ref = all(c in cols for c in CONTACT_REF)
+    return X, has_gyro, has_ref
+
+
+def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
+    """Compiled ``VirtualForceSensor.for_log(log).run(log)``: same columns and index."""
+    from grfguard.estimate.vfs import VirtualForceSensor
+
+    if vfs is None:
+        vfs = VirtualForceSensor.for_log(log)
+    vfs._check_columns(log.columns)
+    X, has_gyro, has_ref = log_to_array(log)
+    k = VFSKernel(vfs, has_gyro=has_gyro, has_ref=has_ref)
+    Y = k.run(X)
+    return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
+
+
+def _base_sensor():
+    from grfguard.estimate.vfs import VirtualForceSensor
+
+    return VirtualForceSensor
+
+
+class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
+    """Drop-in :class:`~grfguard.estimate.vfs.VirtualForceSensor` running the compiled step.
+
+    Same constructor, ``for_log``, ``reset``, ``update(row) -> dict`` and
+    ``run(log) -> DataFrame``; plus the array call :meth:`update_array`. Settings the
+    kernel does not cover (see :meth:`VFSKernel.supports`) fall back to the pure-Python
+    sensor. ``update`` assumes the gyro and planned contact are present in every row
+    (the log contract of a live robot); ``run`` reads what the log has.
+
+    Example:
+        >>> vfs = CompiledVirtualForceSensor.for_log(log)
+        >>> out = vfs.run(log)                      # same columns as the Python sensor
+        >>> mon = Monitor(MonitorConfig(), vfs)     # the monitor takes it as it is
+    """
+
+    def __init__(self, robot=None, config=None, kinematics=None) -> None:
+        super().__init__(robot, config, kinematics)
+        self.compiled = VFSKernel.supports(self.config)
+        self._kern = {}
+        self._y = np.empty(N_OUT)
+        self._x = np.empty(N_IN)
+
+    def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> VFSKernel:
+        """The compiled kernel for inputs with / without gyro and planned contact."""
+        key = (has_gyro, has_ref)
+        if key not in self._kern:
+            self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
+        return self._kern[key]
+
+    def reset(self) -> None:
+        super().reset()
+        for k in getattr(self, "_kern", {}).values():
+            k.reset()
+
+    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample as arrays: ``x`` (24,) in :data:`IN_COLUMNS` order -> (22,) in
+        :data:`OUT_COLUMNS` order (written into ``y`` when given). Never raises on a bad
+        sample (non-finite input: last output held, ``vfs_valid = 0``)."""
+        if y is None:
+            y = np.empty(N_OUT)
+        k = self.kernel()
+        vfs_step(x, y, *k._args())
+        return y
+
+    def update(self, row: Mapping[str, float]) -> dict[str, float]:
+        if not self.compiled:
+            return super().update(row)
+        x = self._x
+        for i, c in enumerate(IN_COLUMNS):
+            try:
+                x[i] = float(row[c])
+            except (KeyError, TypeError, ValueError):
+                x[i] = np.nan
+        y = self.update_array(x, self._y)
+        return dict(zip(OUT_COLUMNS, y.tolist(), strict=True))
+
+    def run(self, log: pd.DataFrame) -> pd.DataFrame:
+        if not self.compiled:
+            return super().run(log)
+        super().reset()
+        self._check_columns(log.columns)
+        X, has_gyro, has_ref = log_to_array(log)
+        k = self.kernel(has_gyro, has_ref)
+        Y = k.run(X)
+        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))

@@ -1,0 +1,1 @@
+"""Test-only helpers: a seeded synthetic run output and a headless-Chromium driver."""
