@@ -35,7 +35,7 @@ def flagged(out) -> list[str]:
 
 
 def mismatch_share(out, robot: RobotConfig) -> tuple[float, str]:
-    cm = CommonModeMonitor(robot, 0.001)
+    cm = CommonModeMonitor(robot, 0.005)
     x = out[[f"force_{s}" for s in SENSOR_NAMES]].to_numpy(float)
     v = out[[f"vfs_{s}" for s in SENSOR_NAMES]].to_numpy(float)
     c = out[["contact_ref_r", "contact_ref_l"]].to_numpy(float) > 0.5
