@@ -28,8 +28,6 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import REALITY_FILES, load_reality
 
 HEADER = "## Reality gap"
-#: The reading of the table is written by hand into BENCHMARKS.md after a run.
-NOTES_FILE_NOTE = "(Reading of the numbers: see the paragraph below, written after the run.)"
 
 
 def flagged(out) -> list[str]:
@@ -115,8 +113,6 @@ def main() -> None:
             f"{e['zero_n']:.2f} | {e['gain_pct']:.2f} | {e['weight_pct']:+.2f} | "
             f"{e['gyro']:.4f} |"
         )
-    lines.append("")
-    lines.append(NOTES_FILE_NOTE)
     lines.append("")
     lines.append(f"Runtime {time.perf_counter() - t0:.0f} s on the shared 2-core machine.")
     text = "\n".join(lines) + "\n"
