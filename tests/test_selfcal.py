@@ -92,3 +92,29 @@ def test_too_short_or_incomplete_log_is_refused(gap_walk):
         estimate_corrections(gap_walk.iloc[:500])
     with pytest.raises(LogFormatError, match="imu_gyro_x"):
         estimate_corrections(gap_walk.drop(columns=["imu_gyro_x"]))
+
+
+def test_cli_simulate_reality_calibrate_model_and_run(gap_walk, tmp_path):
+    from typer.testing import CliRunner
+
+    from grfguard.cli import app
+    from grfguard.io.logio import load_log, write_log
+
+    runner = CliRunner()
+    sim = tmp_path / "g.parquet"
+    res = runner.invoke(app, ["simulate", "-o", str(sim), "--duration", "2",
+                              "--reality", "imu_pitch"])
+    assert res.exit_code == 0, res.output
+    assert load_log(sim).attrs["reality"]["imu_mount_rpy_deg"] == [0.0, 2.0, 0.0]
+    log = tmp_path / "walk.parquet"
+    write_log(gap_walk, log)
+    th = tmp_path / "th.toml"
+    res = runner.invoke(app, ["calibrate", str(log), "-o", str(th), "--model"])
+    assert res.exit_code == 0, res.output
+    text = th.read_text()
+    assert "[thresholds]" in text and "[model_corrections]" in text
+    out = tmp_path / "o.parquet"
+    res = runner.invoke(app, ["run", str(log), "-o", str(out), "--thresholds", str(th)])
+    assert res.exit_code == 0, res.output
+    flags = load_log(out)[[f"flag_{s}" for s in SENSOR_NAMES]]
+    assert not flags.any().any()

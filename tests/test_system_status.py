@@ -14,7 +14,7 @@ from grfguard.model.robot import SENSOR_NAMES, SURALP
 from grfguard.sim import GaitConfig, simulate
 from grfguard.sim.reality import RealityGap
 
-GAIT = GaitConfig(duration=8.0)
+GAIT = GaitConfig(duration=6.0)
 
 
 def _vfs(df: pd.DataFrame) -> pd.DataFrame:
@@ -66,7 +66,7 @@ def test_bad_samples_and_config():
 
 
 def test_wired_monitor_stream_equals_batch_and_has_the_status_column(exact):
-    df = exact[0].iloc[:1500].copy()
+    df = exact[0].iloc[:800].copy()
     df.attrs = dict(exact[0].attrs)
     mon = SystemAwareMonitor.for_log(df)
     batch = mon.run(df)

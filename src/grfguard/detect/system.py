@@ -4,12 +4,13 @@ A model error (mass, attitude, CoM) moves the residuals ``r_i = f_i - v_i`` (mea
 minus virtual force) of every loaded sensor in a pattern fixed by the sole geometry; a
 sensor fault moves one residual. :class:`CommonModeMonitor` fits the common pattern
 
-    r_i ~ alpha v_i + L_f (beta_x x_i + beta_y y_i)
+    r_i ~ alpha v_i + L_f (beta_x x_i / S_x + beta_y y_i / S_y)
 
-(``x_i, y_i`` the sensor position in its sole frame [m], ``L_f`` the load of its foot
-[N]): ``alpha`` is the relative total-force error (mass or gain scale), ``beta`` a CoP
-shift common to both feet (attitude, CoM) in [1/m] (the CoP moves by
-``beta * I_xx / L`` ...; reported here in cm of CoP shift). The fit uses exponentially
+(``x_i, y_i`` the sensor position in its sole frame [m], ``L_f`` the virtual load of
+its foot [N], ``S_x = sum x_k^2`` over a sole's four sensors): ``alpha`` is the relative
+total-force error (mass or gain scale), taken from the ratio of the summed residuals to
+the summed virtual forces; ``beta`` is a CoP shift common to both feet (attitude, CoM)
+in [m], fitted given ``alpha``. The fit uses exponentially
 weighted least squares with a slow time constant (``time_constant_s``, default 10 s) so
 a sudden sensor fault is caught by the per-sensor tests long before the fit could
 absorb it, and it freezes while any sensor is flagged. The fitted pattern is returned as
@@ -18,7 +19,7 @@ absorb it, and it freezes while any sensor is flagged. The fitted pattern is ret
 exceeds ``cop_shift_limit_m``) and a short ``reason``. The correction is zero unless the
 status is raised (on an exact model the per-sensor tests see the plain virtual forces).
 
-Wiring (see :func:`system_aware_run`): per sample, ``v_i + correction_n[i]`` replaces
+Wiring (see :class:`SystemAwareMonitor`): per sample, ``v_i + correction_n[i]`` replaces
 ``v_i`` in the per-sensor detector, and ``model_mismatch`` / ``reason`` go to the output
 (``model_mismatch`` column in ``run``, key in ``update()``, a line in the report).
 """
@@ -126,6 +127,8 @@ class CommonModeMonitor:
         self._M = np.zeros((3, 3))
         self._b = np.zeros(3)
         self._theta = np.zeros(3)
+        self._sum_r = 0.0
+        self._sum_v = 0.0
         self._loaded_s = 0.0
 
     def update(
@@ -172,10 +175,15 @@ class CommonModeMonitor:
             P, r = phi[use], (m - v)[use]
             self._M = lam * self._M + P.T @ P
             self._b = lam * self._b + P.T @ r
+            self._sum_r = lam * self._sum_r + float(r.sum())
+            self._sum_v = lam * self._sum_v + float(P[:, 0].sum())
             self._loaded_s += self.dt_s
-            reg = 1e-6 * (np.trace(self._M) + 1e-9)
+            # alpha from the totals (robust), then the common CoP shift given alpha
+            alpha = self._sum_r / self._sum_v if self._sum_v > 0 else 0.0
+            Mxy = self._M[1:, 1:] + 1e-6 * (np.trace(self._M[1:, 1:]) + 1e-9) * np.eye(2)
             try:
-                self._theta = np.linalg.solve(self._M + reg * np.eye(3), self._b)
+                beta = np.linalg.solve(Mxy, self._b[1:] - alpha * self._M[1:, 0])
+                self._theta = np.array([alpha, beta[0], beta[1]])
             except np.linalg.LinAlgError:
                 pass
         th = self._theta if self._loaded_s >= c.warmup_s else np.zeros(3)
