@@ -121,7 +121,7 @@ class TreeModel:
 
 
 # ----------------------------------------------------------------------------- MuJoCo maths
-@njit
+@njit(inline="always")
 def _normalize4(v):
     n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3])
     if n < _MINVAL:
@@ -138,7 +138,7 @@ def _normalize4(v):
     return n
 
 
-@njit
+@njit(inline="always")
 def _mulquat(res, qa, qb):
     t0 = qa[0] * qb[0] - qa[1] * qb[1] - qa[2] * qb[2] - qa[3] * qb[3]
     t1 = qa[0] * qb[1] + qa[1] * qb[0] + qa[2] * qb[3] - qa[3] * qb[2]
@@ -150,7 +150,7 @@ def _mulquat(res, qa, qb):
     res[3] = t3
 
 
-@njit
+@njit(inline="always")
 def _rotvecquat(res, vec, quat):
     if vec[0] == 0 and vec[1] == 0 and vec[2] == 0:
         res[0] = 0.0
@@ -172,7 +172,7 @@ def _rotvecquat(res, vec, quat):
         res[2] = r2
 
 
-@njit
+@njit(inline="always")
 def _quat2mat(res, q):
     if q[0] == 1 and q[1] == 0 and q[2] == 0 and q[3] == 0:
         for k in range(9):
@@ -203,7 +203,7 @@ def _quat2mat(res, q):
     res[7] = 2 * (q23 + q01)
 
 
-@njit
+@njit(inline="always")
 def _matvec3(res, mat, vec):
     r0 = mat[0] * vec[0] + mat[1] * vec[1] + mat[2] * vec[2]
     r1 = mat[3] * vec[0] + mat[4] * vec[1] + mat[5] * vec[2]
@@ -213,7 +213,7 @@ def _matvec3(res, mat, vec):
     res[2] = r2
 
 
-@njit
+@njit(inline="always")
 def _local2global(xpos_out, xmat_out, pos, quat, body, sameframe, xpos, xquat, xmat, xipos,
                   ximat, tmp4, tmp3):
     # sameframe: 0 none, 1 body, 2 inertia, 3 body rotation, 4 inertia rotation

@@ -74,7 +74,7 @@ def _state_size(nbr: int, order: int) -> int:
     return _S_FIXED + 15 * order + 12 * nbr
 
 
-@njit
+@njit(inline="always")
 def _qmul(aw, ax, ay, az, bw, bx, by, bz):
     return (
         aw * bw - ax * bx - ay * by - az * bz,
@@ -84,7 +84,7 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):
     )
 
 
-@njit
+@njit(inline="always")
 def _qexp(x, y, z):
     th = math.sqrt(x * x + y * y + z * z)
     if th < 1e-12:
@@ -111,13 +111,13 @@ def _lfilter_step(b, a, zst, x, y, zi, init):
         y[c] = yn
 
 
-@njit
+@njit(inline="always")
 def _sum8(a):
     # numpy's pairwise sum of a contiguous 8-vector
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
 
 
-@njit
+@njit(inline="always")
 def _sum_seq(a, n):
     s = a[0]
     for i in range(1, n):
