@@ -369,8 +369,11 @@ def _raw_sqlite(files: list[Path], topics: list[str]
             return None
         offs = np.zeros(lens.size, dtype=np.int64)
         np.cumsum(lens[:-1], out=offs[1:])
+        by = np.argsort(tid.astype(np.uint16), kind="stable")  # per topic, in row order
+        st = tid[by]
         for i, name in ids.items():
-            sel = tid == i
+            lo, hi = np.searchsorted(st, [i, i + 1]).tolist()
+            sel = by[lo:hi]
             parts[name].append((offs[sel] + base, lens[sel], tstamp[sel]))
         blobs.append(data)
         base += len(data)
