@@ -43,7 +43,7 @@ def _unit(kind: str, v: float) -> str:
             "noise": f"σ {v:g} N", "spikes": f"{v:g} N"}.get(kind, f"{v:g}")
 
 
-def body(spec_path: Path, store: ResultStore, rep: CampaignReport) -> str:
+def body(spec_path: Path, store: ResultStore, rep: CampaignReport, note: str = "") -> str:
     runs = [r for r in store.runs() if r.get("n_computed", 0) > 0]
     last = runs[-1] if runs else {}
     d = rep.df
@@ -62,7 +62,9 @@ def body(spec_path: Path, store: ResultStore, rep: CampaignReport) -> str:
         f"computed in the last run: {last.get('n_computed', 0)} with "
         f"{last.get('workers', '?')} workers in {_f(last.get('compute_s', math.nan), '{:.0f}')} s "
         f"= **{_f(last.get('cells_per_min', math.nan), '{:.0f}')} cells/min**; mean compute per "
-        f"cell {d['compute_s'].mean():.2f} s (11 s walks; 60 s for fault-free cells)",
+        f"cell {d['compute_s'].mean():.2f} s (11 s walks; 60 s for fault-free cells)"
+        + (f"; load average {last['load_avg_1min']:.1f} at the end of the run"
+           if "load_avg_1min" in last else "") + (f". {note}" if note else ""),
         "",
         "Smallest fault detected in 95 % of runs (threshold scale 1; 12 runs per size = "
         "4 onsets over one stride x 3 seeds; every larger tested size also >= 95 %):",
@@ -97,16 +99,17 @@ def body(spec_path: Path, store: ResultStore, rep: CampaignReport) -> str:
     lines += ["", "Detection rate and median delay [s] per kind and size (scale 1):", "",
               "| kind | size | default rate | default delay | paper rate | paper delay |",
               "|---|---|---|---|---|---|"]
-    piv = det.pivot_table(index=["kind", "size"], columns="method", dropna=False,
-                          values=["rate", "delay_median_s"], aggfunc="first")
-    for (kind, size), r in piv.iterrows():
-        def g(col: str, meth: str, r: pd.Series = r) -> float:
-            return float(r.get((col, meth), math.nan))
+    for (kind, size), g in det.groupby(["kind", "size"], dropna=False, sort=True):
+        by = g.set_index("method")
 
-        lines.append(f"| {kind} | {size:g} | {_f(g('rate', 'default'), '{:.0%}')} | "
-                     f"{_f(g('delay_median_s', 'default'), '{:.2f}')} | "
-                     f"{_f(g('rate', 'paper'), '{:.0%}')} | "
-                     f"{_f(g('delay_median_s', 'paper'), '{:.2f}')} |")
+        def cell(col: str, meth: str, fmt: str, by: pd.DataFrame = by) -> str:
+            return _f(float(by.loc[meth, col]), fmt) if meth in by.index else "–"
+
+        lines.append(f"| {kind} | {'–' if math.isnan(size) else f'{size:g}'} | "
+                     f"{cell('rate', 'default', '{:.0%}')} | "
+                     f"{cell('delay_median_s', 'default', '{:.2f}')} | "
+                     f"{cell('rate', 'paper', '{:.0%}')} | "
+                     f"{cell('delay_median_s', 'paper', '{:.2f}')} |")
     return "\n".join(lines) + "\n"
 
 
@@ -116,6 +119,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "campaigns")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--note", default="", help="Conditions of the run, for BENCHMARKS.md.")
     args = ap.parse_args()
     spec = load_spec(args.spec)
     results = args.out / spec.name
@@ -123,7 +127,7 @@ def main() -> None:
     print(summary, f"{summary.cells_per_min:.0f} cells/min")
     rep = CampaignReport(results)
     print("report:", rep.write(args.out / f"{spec.name}-report"))
-    text = body(args.spec.resolve(), ResultStore(results), rep)
+    text = body(args.spec.resolve(), ResultStore(results), rep, args.note)
     print(text)
     if not args.no_write:
         update_section(SECTION, text)

@@ -1,8 +1,9 @@
 """Reference solution of the corner QP with a maintained solver (daqp through qpsolvers).
 
 Dev dependency only: the package never imports it. Same problem as
-:mod:`grfguard.estimate.corner_qp`: ``min ‖C N - d‖² + w ‖N‖²`` s.t. ``N ≥ 0``,
-``Σ N = b``, ``N_i = 0`` off the allowed points; ``b ≤ 0`` gives zeros.
+:mod:`grfguard.estimate.corner_qp`: ``min ‖C N - d‖² + w ‖N - N^p‖²`` s.t. ``N ≥ 0``,
+``Σ N = b``, ``N_i = 0`` off the allowed points (``N^p = 0`` there; the prior ``N^p`` of
+:mod:`grfguard.estimate.compliance` otherwise); ``b ≤ 0`` gives zeros.
 """
 
 from __future__ import annotations
@@ -12,14 +13,20 @@ import qpsolvers
 
 
 def reference_qp(
-    points: np.ndarray, d: np.ndarray, b: float, w: float, allowed: np.ndarray | None = None
+    points: np.ndarray,
+    d: np.ndarray,
+    b: float,
+    w: float,
+    allowed: np.ndarray | None = None,
+    prior: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Forces (n,) [N] of one sample: points (n, 2) [m], d (2,) [N m], b [N], w [m²]."""
+    """Forces (n,) [N] of one sample: points (n, 2) [m], d (2,) [N m], b [N], w [m²],
+    prior (n,) [N]."""
     n = points.shape[0]
     if b <= 0.0:
         return np.zeros(n)
     P = 2.0 * (points @ points.T + w * np.eye(n))
-    q = -2.0 * points @ d
+    q = -2.0 * points @ d - (0.0 if prior is None else 2.0 * w * prior)
     ub = np.full(n, np.inf) if allowed is None else np.where(allowed, np.inf, 0.0)
     x = qpsolvers.solve_qp(P, q, A=np.ones((1, n)), b=np.array([b]), lb=np.zeros(n), ub=ub,
                            solver="daqp")

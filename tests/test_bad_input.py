@@ -383,7 +383,8 @@ def test_backwards_and_constant_time(walk, tmp_path) -> None:
     res = runner.invoke(app, ["run", str(pb), "-o", str(tmp_path / "o.parquet"),
                               "--time-order", "split"])
     assert res.exit_code == 0, res.output
-    out = load_log(tmp_path / "o.parquet")  # the output reads back: time rises per segment
+    with pytest.warns(GrfguardWarning, match="time gap"):  # the 0.3 s cut inside segment 1
+        out = load_log(tmp_path / "o.parquet")  # the output reads back: time rises per segment
     assert out["segment"].max() == 1 and len(out) == len(back)
     const = df.copy()
     const.loc[2000:2299, "time"] = const.loc[2000, "time"]
@@ -466,3 +467,54 @@ def test_fault_outside_the_log_is_refused(walk, tmp_path) -> None:
                                                "--fault", "r1=offset:10@50"]))
     assert "outside the log" in line and "nothing would be injected" in line
     assert not out.exists()
+
+
+def test_png_figures_move_in_atomically(tmp_path) -> None:
+    from grfguard.cli import _write_pngs_atomically
+
+    figs = tmp_path / "figs"
+    figs.mkdir()
+    (figs / "a.png").write_bytes(b"old a")
+
+    def good(df, out):
+        paths = [out / "a.png", out / "b.png"]
+        for p in paths:
+            p.write_bytes(b"new " + p.name.encode())
+        return paths
+
+    def dies_half_way(df, out):
+        (out / "a.png").write_bytes(b"partial")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OutputError, match="previous figures"):
+        _write_pngs_atomically(None, figs, dies_half_way)
+    assert (figs / "a.png").read_bytes() == b"old a"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"]  # no temporary directory
+    assert _write_pngs_atomically(None, figs, good) == [figs / "a.png", figs / "b.png"]
+    assert (figs / "a.png").read_bytes() == b"new a.png"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"]
+
+
+@pytest.mark.parametrize(("duration", "needle"), [("1e9", "GB of memory"),
+                                                   ("nan", "positive number")])
+def test_simulate_duration_is_checked_against_memory(tmp_path, duration, needle) -> None:
+    out = tmp_path / "w.parquet"
+    line = _one_error_line(runner.invoke(app, ["simulate", "--duration", duration, "-o",
+                                               str(out)]))
+    assert needle in line and not out.exists()
+
+
+def test_calibrate_on_a_few_samples_is_refused(walk, tmp_path) -> None:
+    short = write_log(read_log(walk).iloc[:5], tmp_path / "five.parquet")
+    out = tmp_path / "th.toml"
+    line = _one_error_line(runner.invoke(app, ["calibrate", str(short), "-o", str(out)]))
+    assert "at least 5 s" in line and not out.exists()
+
+
+def test_infinite_threshold_is_never_silent(walk, tmp_path) -> None:
+    th = tmp_path / "th.toml"
+    th.write_text("[thresholds]\nswing_h = inf\n")
+    res = runner.invoke(app, ["run", str(walk), "-o", str(tmp_path / "o.parquet"),
+                              "--thresholds", str(th)])
+    assert res.exit_code == 0, res.output
+    assert "warning:" in res.output and "['swing_h'] = inf switch those tests off" in res.output

@@ -304,3 +304,26 @@ def test_same_spec_on_external_scheduler_and_worker(local_results, tmp_path):
     # same cells, same numbers: the engine does not change the results
     pd.testing.assert_frame_equal(ext[DETERMINISTIC], loc[DETERMINISTIC])
     assert ext["worker"].nunique() >= 1
+
+
+def test_results_folder_of_another_spec_is_refused(tmp_path):
+    store = ResultStore(tmp_path)
+    cells = pd.DataFrame({"cell_id": ["offset-abc"]})
+    store.prepare(TINY, cells)
+    store.write({"cell_id": "offset-abc", "method": "default", "kind": "offset"})
+    store.prepare(TINY, cells)  # the same spec again: fine (resume)
+    with pytest.raises(ConfigError, match="another campaign spec"):
+        store.prepare(TINY.replace("window_s = 2.0", "window_s = 1.5"), cells)
+
+
+def test_cli_bad_spec_exits_2_with_message(tmp_path):
+    from typer.testing import CliRunner
+
+    from grfguard.cli import app
+
+    spec = tmp_path / "bad.toml"
+    spec.write_text(TINY.replace("stuck = []", "stuk = []"))
+    res = CliRunner().invoke(app, ["campaign", "run", str(spec), "-o", str(tmp_path / "r")])
+    assert res.exit_code == 2
+    assert "fault kind 'stuk' unknown" in res.output
+    assert not (tmp_path / "r").exists()

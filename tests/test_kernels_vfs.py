@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from grfguard.errors import ConfigError
+from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.compliance import _solve_core
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS, VirtualForceSensor
@@ -136,3 +136,16 @@ def test_compliance_qp_against_exact_rationals():
     # both solve the same problem; ours is at least as close to the exact minimiser
     assert worst_ours <= 1e-10  # measured 2e-12 N
     assert worst_scipy <= 1e-7  # measured 2e-9 N
+
+
+def test_array_call_rejects_wrong_shapes_and_survives_garbage(walk):
+    vfs = CompiledVirtualForceSensor.for_log(walk)
+    with pytest.raises(LogFormatError, match="IN_COLUMNS"):
+        vfs.update_array(np.zeros(23))
+    with pytest.raises(LogFormatError, match=r"\(T, 24\)"):
+        vfs.kernel().run(np.zeros((5, 20)))
+    # garbage rows never raise: NaN output (nothing valid yet) with vfs_valid = 0
+    y = vfs.update_array(np.full(24, np.inf))
+    assert np.isnan(y[:-1]).all() and y[-1] == 0.0
+    y = vfs.update(dict.fromkeys(["q_r_hip_yaw", "imu_quat_w"], "junk"))
+    assert y["vfs_valid"] == 0.0

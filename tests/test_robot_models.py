@@ -161,3 +161,28 @@ def test_cli_robot_list_show_simulate_decimate(tmp_path) -> None:
     res = runner.invoke(app, ["decimate", str(out), "--rate", "300", "-o",
                               str(tmp_path / "x.parquet")])
     assert res.exit_code == 2 and "must divide" in res.output
+
+
+def test_talos_virtual_ft_accuracy_on_noisy_log(talos) -> None:
+    """Default sensor noise (IMU noise and bias, attitude error, 2^17-count encoders)."""
+    df = simulate_robot(talos, scaled_gait(talos, duration=6.0), NoiseConfig(), seed=3)
+    acc = evaluate_wrenches(df, estimate_wrenches(df, talos), talos)
+    assert acc["foot_fz"] <= 0.5 and acc["ft_fz"] <= 1.0
+    assert acc["ft_tx"] <= 1.0 and acc["ft_ty"] <= 1.0
+
+
+def test_mjcf_model_suralp_described(default_walk) -> None:
+    """The MJCF path: SURALP's own MJCF (its actuators, sensors and contacts replaced),
+    a whole-body walk of it, and the virtual corner forces on the dedicated SURALP log."""
+    r = load_model(load_description("suralp"))
+    assert len(r.joint_names) == 12 and r.mass == pytest.approx(114.0)
+    df = simulate_robot(r, scaled_gait(r, duration=3.0), NoiseConfig.none())
+    fz = df["true_grf_r_z"] + df["true_grf_l_z"]
+    assert abs(fz.mean() / (r.mass * 9.81) - 1.0) < 0.005
+    log = default_walk.iloc[:6000]
+    est = estimate_wrenches(log, r)
+    t = log["time"].to_numpy()
+    ss = ((log["contact_ref_r"] == 1) & (log["contact_ref_l"] == 0) & (t > 2.0)).to_numpy()
+    err = est.ground[0, ss, 2] - log.loc[ss, [f"true_force_r{k}" for k in range(1, 5)]].sum(
+        axis=1).to_numpy()
+    assert np.sqrt(np.mean(err**2)) < 0.01 * 114.0 * 9.81

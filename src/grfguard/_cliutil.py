@@ -201,6 +201,7 @@ def check_monitor_toml(path: str | Path, option: str = "--config") -> Any:
         )
     for key, known in tables.items():
         _check_table(doc, key, lead, known)
+    _warn_disabled(doc.get("thresholds"), lead)
     return _build(lambda: MonitorConfig.from_toml(p), lead)
 
 
@@ -220,7 +221,22 @@ def check_thresholds_toml(path: str | Path, option: str = "--thresholds") -> Any
                               "table is allowed")
     else:
         _check_keys(doc, lead, "the file", known)
+    _warn_disabled(doc.get("thresholds", doc), lead)
     return _build(lambda: Thresholds.from_toml(p), lead)
+
+
+def _warn_disabled(table: Any, lead: str) -> None:
+    """An infinite threshold switches its test off: say so (it is never silent)."""
+    if not isinstance(table, Mapping):
+        return
+    off = sorted(k for k, v in table.items() if isinstance(v, float) and v == float("inf"))
+    if off:
+        warnings.warn(
+            f"{lead}: threshold(s) {off} = inf switch those tests off; use finite values "
+            "(`grfguard calibrate`) to keep them on",
+            GrfguardWarning,
+            stacklevel=3,
+        )
 
 
 def check_faults_toml(path: str | Path, option: str = "--faults") -> list[Any]:
@@ -278,8 +294,16 @@ def resolve_robot(value: str | Path | None, option: str = "--robot") -> Any:
 
     text = str(value)
     p = Path(text)
-    if p.suffix.lower() == ".toml" or p.exists() or "/" in text or "\\" in text:
-        read_toml(p, "robot TOML", option)
+    from grfguard.cli_robot import is_described_robot
+
+    looks_like_path = p.suffix.lower() == ".toml" or p.exists() or "/" in text or "\\" in text
+    if looks_like_path:
+        read_toml(p, "robot TOML", option)  # a directory, binary or broken file: one line
+    if is_described_robot(text):  # Talos, G1 or a TOML with a model file
+        from grfguard.model.description import load_description
+
+        return _build(lambda: load_description(text), f"{option} {text}")
+    if looks_like_path:
         return _build(lambda: robot_mod.RobotConfig.from_toml(p), f"{option} {p}")
     name = text.lower()
     if name == "suralp":
@@ -305,6 +329,11 @@ def robot_for_log(df: Any, robot: Any, where: str, option: str = "--robot") -> A
     names one. A log without robot metadata and no ``--robot`` is refused: grfguard never
     guesses the robot (a wrong mass flags every sensor)."""
     meta = df.attrs.get("robot")
+    if robot is not None and hasattr(robot, "sensing"):  # a described robot
+        df.attrs["robot"] = robot.to_dict()
+        df.attrs["robot_name"] = robot.name
+        df.attrs["sensing"] = robot.sensing
+        return robot
     if robot is not None:
         if isinstance(meta, Mapping) and meta.get("mass") not in (None, robot.mass):
             warnings.warn(
@@ -329,17 +358,11 @@ def check_log_plausible(df: Any, robot: Any, where: str) -> None:
     kN/kgf, acceleration in g, angles in degrees, a sensor on the wrong foot); warn about
     doubtful ones. ``robot`` None means the robot of ``df.attrs``."""
     from grfguard.io.plausibility import check_log
-    from grfguard.model.robot import RobotConfig
 
-    if robot is None:
-        meta = df.attrs.get("robot")
-        if isinstance(meta, str):
-            import json
-
-            meta = json.loads(meta)
-        if not isinstance(meta, Mapping):
+    if robot is None or hasattr(robot, "sensing"):
+        robot = _robot_of_log(df)
+        if robot is None:
             return
-        robot = RobotConfig.from_dict(dict(meta))
     issues = check_log(df, robot)
     for issue in issues:
         if issue.severity != "error":
@@ -350,3 +373,24 @@ def check_log_plausible(df: Any, robot: Any, where: str) -> None:
         raise LogFormatError(
             f"{where}: {errors[0].message}{more}; if the log is right, pass --no-unit-check"
         )
+
+
+def _robot_of_log(df: Any) -> Any:
+    """Something with the robot's ``mass`` [kg] from the log's metadata, or None."""
+    import json
+    from types import SimpleNamespace
+
+    from grfguard.model.robot import RobotConfig
+
+    mass = df.attrs.get("mass")
+    if "sensing" in df.attrs and isinstance(mass, (int, float)) and mass > 0:
+        return SimpleNamespace(mass=float(mass))  # a described robot (Talos, G1, ...)
+    meta = df.attrs.get("robot")
+    try:
+        if isinstance(meta, str):
+            meta = json.loads(meta)
+        if isinstance(meta, Mapping):
+            return RobotConfig.from_dict(dict(meta))
+    except (GrfguardError, TypeError, ValueError):
+        return None
+    return None

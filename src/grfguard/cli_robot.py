@@ -46,10 +46,10 @@ def robot_list() -> None:
     """List the shipped robots."""
     from grfguard.model.description import load_description, shipped_robots
 
-    out.print("suralp\tbuilt-in 12-joint biped of the paper, 4 corner load cells per sole")
     for name in shipped_robots():
         d = load_description(name)
-        out.print(f"{name}\t{d.model.name}, {d.sensing} sensing", highlight=False)
+        model = "grfguard's MJCF of the paper's biped" if name == "suralp" else d.model.name
+        out.print(f"{name}\t{model}, {d.sensing} sensing", highlight=False)
 
 
 @robot_app.command("show")

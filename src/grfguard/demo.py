@@ -17,7 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
+
+from grfguard.config import monitor_config
+from grfguard.evaluate.frame import evaluate_frame
+from grfguard.io.logio import to_jsonable, write_log
+from grfguard.io.safe import atomic_write_text
 
 __all__ = ["PAPER_FAULTS", "RUNS", "run_demo", "plot_corner_forces"]
 
@@ -52,78 +58,87 @@ def run_demo(
     Returns:
         The metrics of both methods.
     """
-    from grfguard.config import monitor_config
-    from grfguard.detect.monitor import Monitor
-    from grfguard.evaluate.frame import evaluate_frame
-    from grfguard.faults import inject_faults, parse_fault_spec
-    from grfguard.io.logio import to_jsonable, write_log
-    from grfguard.report.figures import write_png_figures
-    from grfguard.report.html import write_html_report
-    from grfguard.sim import GaitConfig, NoiseConfig, simulate
-
     console = console or Console(stderr=True)
     out = out or Console()
     if not out.is_terminal:
         out = Console(width=160)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    faulty = _walk_with_faults(out_dir, duration, seed, console)
+    runs, results = _run_methods(faulty, out_dir, console)
+    console.print("[bold]4/5[/] writing figures and metrics")
+    atomic_write_text(out_dir / "metrics.json", json.dumps(to_jsonable(results), indent=2))
+    atomic_write_text(out_dir / "metrics.md", _metrics_markdown(results))
+    n_png = _write_figures(runs, results, out_dir)
+    console.print("[bold]5/5[/] writing the HTML report")
+    report = _write_reports(runs, results, out_dir)
+    _print_table(results, out)
+    console.print(f"{n_png} figures in {escape(str(out_dir / 'figures'))}")
+    out.print(f"report: {escape(str(report.resolve()))}")
+    return results
+
+
+def _walk_with_faults(out_dir: Path, duration: float, seed: int, console: Console) -> Any:
+    """Steps 1-2: the simulated walk and its faulty copy (both written to ``out_dir``)."""
+    from grfguard.faults import inject_faults, parse_fault_spec
+    from grfguard.sim import GaitConfig, NoiseConfig, simulate
 
     console.print(f"[bold]1/5[/] simulating a {duration:g} s SURALP walk (seed {seed})")
     walk = simulate(gait=GaitConfig(duration=duration), noise=NoiseConfig(), seed=seed)
     write_log(walk, out_dir / "walk.parquet")
     fig, _ = plot_corner_forces(walk)
     fig.savefig(out_dir / "corner_forces.png", dpi=120)
-
     console.print("[bold]2/5[/] injecting the paper's faults: " + ", ".join(PAPER_FAULTS))
     faulty = inject_faults(walk, [parse_fault_spec(s) for s in PAPER_FAULTS], seed=seed)
     write_log(faulty, out_dir / "walk_faulty.parquet")
+    return faulty
 
-    results: dict[str, Any] = {}
-    runs = {}
+
+def _run_methods(
+    faulty: Any, out_dir: Path, console: Console
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Step 3: every run of :data:`RUNS` on the faulty walk, and its metrics."""
+    from grfguard.detect import Monitor
+
+    runs, results = {}, {}
     for method, (observer, vfs) in RUNS.items():
         console.print(f"[bold]3/5[/] running the monitor: {method}")
-        cfg = monitor_config(method=observer, vfs=vfs)
-        res = Monitor.for_log(faulty, config=cfg).run(faulty)
+        res = Monitor.for_log(faulty, config=monitor_config(method=observer, vfs=vfs)).run(faulty)
         write_log(res, out_dir / f"run_{method}.parquet")
         runs[method] = res
         results[method] = evaluate_frame(res)
+    return runs, results
 
-    console.print("[bold]4/5[/] writing figures and metrics")
-    (out_dir / "metrics.json").write_text(json.dumps(to_jsonable(results), indent=2))
-    table_md = _metrics_markdown(results)
-    (out_dir / "metrics.md").write_text(table_md)
-    pngs = write_png_figures(
-        runs["default"], out_dir / "figures",
-        metrics=results["default"].get("detection", {}).get("sensors"),
-    )
+
+def _sensor_metrics(results: dict[str, Any], method: str) -> Any:
+    return results[method].get("detection", {}).get("sensors")
+
+
+def _write_figures(runs: dict[str, Any], results: dict[str, Any], out_dir: Path) -> int:
+    """PNG figures of the default run (whole walk and 3-9 s) and of the paper's run."""
+    from grfguard.report.figures import write_png_figures
+
+    metrics = _sensor_metrics(results, "default")
+    pngs = write_png_figures(runs["default"], out_dir / "figures", metrics=metrics)
     # The same figures over six seconds around the onset, where single steps are visible.
-    pngs += write_png_figures(
-        runs["default"], out_dir / "figures_zoom",
-        metrics=results["default"].get("detection", {}).get("sensors"),
-        t_range=(3.0, 9.0), per_sensor=False,
-    )
-    pngs += write_png_figures(
-        runs["paper"], out_dir / "figures_paper",
-        metrics=results["paper"].get("detection", {}).get("sensors"),
-    )
+    pngs += write_png_figures(runs["default"], out_dir / "figures_zoom", metrics=metrics,
+                              t_range=(3.0, 9.0), per_sensor=False)
+    pngs += write_png_figures(runs["paper"], out_dir / "figures_paper",
+                              metrics=_sensor_metrics(results, "paper"))
+    return len(pngs)
 
-    console.print("[bold]5/5[/] writing the HTML report")
-    report = write_html_report(
-        runs["default"],
-        out_dir / "report.html",
-        metrics=results["default"].get("detection", {}).get("sensors"),
-        title="grfguard: the paper's scenario (default method)",
-    )
-    write_html_report(
-        runs["paper"],
-        out_dir / "report_paper.html",
-        metrics=results["paper"].get("detection", {}).get("sensors"),
-        title="grfguard: the paper's scenario (paper's method)",
-    )
-    _print_table(results, out)
-    console.print(f"{len(pngs)} figures in {out_dir / 'figures'}")
-    out.print(f"report: {report.resolve()}")
-    return results
+
+def _write_reports(runs: dict[str, Any], results: dict[str, Any], out_dir: Path) -> Path:
+    """HTML reports of the default and the paper's run; returns the default one's path."""
+    from grfguard.report.html import write_html_report
+
+    for method, name, label in (("paper", "report_paper.html", "paper's method"),
+                                ("default", "report.html", "default method")):
+        path = write_html_report(
+            runs[method], out_dir / name, metrics=_sensor_metrics(results, method),
+            title=f"grfguard: the paper's scenario ({label})",
+        )
+    return path
 
 
 def plot_corner_forces(log: Any, t_max: float = 6.0) -> tuple[Any, Any]:

@@ -119,9 +119,9 @@ class Monitor:
         if self.config.method == "paper":
             return self.paper.step(t, x, v)
         det = self.detector.step(t, x, v, tot, cref, cest)
-        out = det.columns
-        out.update(self.recovery.step(self.detector.sensors, x, v, tot))
-        out.update(det.diagnostics)
+        out = self.recovery.step(self.detector.sensors, x, v, tot, det.columns)
+        if det.diagnostics:
+            out.update(det.diagnostics)
         return out
 
     def update(self, row: Mapping[str, Any]) -> dict[str, Any]:

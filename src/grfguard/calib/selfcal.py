@@ -65,6 +65,12 @@ _EDGE_S = 0.06  # margin around contact transitions [s]
 #: Relative ridge weight pulling the load-cell gains toward a common value (only
 #: directions the walk does not excite are affected).
 GAIN_RIDGE = 0.01
+#: The same with a quiet accelerometer (a_z measured: the fit is well conditioned).
+GAIN_RIDGE_QUIET = 1e-4
+#: Low-pass cut-off of the whole-body balance fit of the gains in [Hz].
+GAIN_FIT_CUTOFF_HZ = 10.0
+#: Accelerometer RMS above 10 Hz [m/s^2] up to which it is used in the gain fit.
+ACC_QUIET_RMS = 0.2
 
 
 def _rpy_to_R(rpy_rad: np.ndarray) -> np.ndarray:
@@ -376,64 +382,94 @@ def estimate_corrections(
     sigma["imu_mount_deg"] = float(np.degrees(np.std(res[:, :2]) / math.sqrt(n_eff)))
     rpy = _R_to_rpy(R_BI)
 
-    # 5. gains and mass from the whole-body balance (0.1 s means: a_z averages out; the
-    # accelerometer's impact vibration correlates with the load pattern, so it is not used)
-    A, y = [], []
-    for d in data:
-        n = max(1, int(round(0.1 / d.dt)))
-        A.append(_blocks(d.f - zero, n))
-        y.append(np.full(len(A[-1]), g))
-    A_all, y_all = np.concatenate(A), np.concatenate(y)
-    w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
-    # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
-    reg = GAIN_RIDGE * float((A_all**2).sum()) / 8.0
-    M = A_all.T @ A_all + reg * np.eye(8)
-    w = np.linalg.solve(M, A_all.T @ y_all + reg * w0)
-    res = y_all - A_all @ w
-    cov = np.linalg.inv(M) * float(np.var(res))
-    km = 1.0 / w  # gain_i * mass
-    if measured_mass_kg is not None:
-        mass = float(measured_mass_kg)
-        gains = km / mass
-    else:
-        mass = float(np.mean(km))
-        gains = km / mass
-    for i, s in enumerate(SENSOR_NAMES):
-        sigma[f"gain_{s}"] = float(math.sqrt(max(cov[i, i], 0.0)) * km[i] ** 2 / mass)
-    var_km = np.clip(np.diag(cov), 0.0, None) * km**4
-    sigma["mass_kg"] = float(math.sqrt(var_km.sum()) / 8.0)
+    # steps 5-6 twice: the second pass computes the relative CoM motion with the
+    # corrected trunk CoM
+    rob_fit = robot
+    for _ in range(2):
+        # 5. gains and mass from the whole-body balance. The vertical CoM acceleration is the
+        # trunk's (accelerometer, world z) plus the CoM's relative to the trunk (kinematics);
+        # both sides low-passed at GAIN_FIT_CUTOFF_HZ. An accelerometer that shakes at the
+        # impacts (RMS above 10 Hz > ACC_QUIET_RMS) would bias the fit: then a_z = 0 over 0.1 s.
+        from scipy.signal import butter, savgol_filter, sosfiltfilt
 
-    # 6. trunk CoM from mean(CoP - CoM)
-    rob_c = dataclasses.replace(robot, mass=mass)
-    diffs_xy = []
-    p_F = robot.sensor_positions_in_foot()
-    for d in data:
-        fz = (d.f - zero) / gains
-        R_WB = quat_to_rotation(d.quat) @ R_BI.T
-        # yaw-free trunk frame: remove the trunk's heading
-        yaw = np.arctan2(R_WB[:, 1, 0], R_WB[:, 0, 0])
-        c, s_ = np.cos(-yaw), np.sin(-yaw)
-        Rz = np.zeros_like(R_WB)
-        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s_, s_, c
-        Rz[:, 2, 2] = 1.0
-        R_H = Rz @ R_WB
-        com = center_of_mass(rob_c, np.zeros(3), R_H, d.q)
-        num = np.zeros((len(fz), 2))
-        for si, sd in enumerate(SIDES):
-            p_S, R_S = leg_fk(rob_c, sd, np.zeros(3), R_H, d.q[:, 6 * si : 6 * si + 6])
-            for k in range(4):
-                pk = p_S + R_S @ np.array([p_F[k, 0], p_F[k, 1], 0.0])
-                num += fz[:, 4 * si + k, None] * pk[:, :2]
-        tot = fz.sum(axis=1)
-        ok = tot > 0.5 * rob_c.weight
-        cop = num[ok] / tot[ok, None]
-        diffs_xy.append(cop - com[ok, :2])
-    dxy = np.concatenate(diffs_xy)
-    frac = robot.trunk_mass_fraction
-    d_com = dxy.mean(axis=0) / frac
-    sigma["trunk_com_m"] = float(
-        np.std(dxy) / frac / math.sqrt(max(1.0, len(dxy) * data[0].dt / 1.0))
-    )
+        A, y = [], []
+        quiet = True
+        for d in data:
+            nyq = 0.5 / d.dt
+            hf = sosfiltfilt(butter(4, min(10.0 / nyq, 0.9), "highpass", output="sos"), d.acc[:, 2])
+            quiet &= float(np.sqrt(np.mean(hf**2))) < ACC_QUIET_RMS
+        for d in data:
+            nyq = 0.5 / d.dt
+            if quiet:
+                acc_B = (d.acc - b_a) @ R_BI.T  # R_BI (acc - b)
+                R_WB = quat_to_rotation(d.quat) @ R_BI.T
+                a_trunk = np.einsum("tj,tj->t", R_WB[:, 2, :], acc_B) - g
+                rel = center_of_mass(rob_fit, np.zeros(3), R_WB, d.q)[:, 2]
+                win = 2 * int(round(0.025 / d.dt)) + 1
+                a_rel = savgol_filter(rel, win, 3, deriv=2, delta=d.dt)
+                sos = butter(4, min(GAIN_FIT_CUTOFF_HZ / nyq, 0.9), output="sos")
+                step = max(1, int(round(0.01 / d.dt)))
+                A.append(sosfiltfilt(sos, d.f - zero, axis=0)[::step])
+                y.append(sosfiltfilt(sos, g + a_trunk + a_rel)[::step])
+            else:
+                n = max(1, int(round(0.1 / d.dt)))
+                A.append(_blocks(d.f - zero, n))
+                y.append(np.full(len(A[-1]), g))
+        A_all, y_all = np.concatenate(A), np.concatenate(y)
+        w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
+        # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
+        reg = (GAIN_RIDGE_QUIET if quiet else GAIN_RIDGE) * float((A_all**2).sum()) / 8.0
+        M = A_all.T @ A_all + reg * np.eye(8)
+        w = np.linalg.solve(M, A_all.T @ y_all + reg * w0)
+        res = y_all - A_all @ w
+        cov = np.linalg.inv(M) * float(np.var(res))
+        km = 1.0 / w  # gain_i * mass
+        if measured_mass_kg is not None:
+            mass = float(measured_mass_kg)
+            gains = km / mass
+        else:
+            mass = float(np.mean(km))
+            gains = km / mass
+        for i, s in enumerate(SENSOR_NAMES):
+            sigma[f"gain_{s}"] = float(math.sqrt(max(cov[i, i], 0.0)) * km[i] ** 2 / mass)
+        var_km = np.clip(np.diag(cov), 0.0, None) * km**4
+        sigma["mass_kg"] = float(math.sqrt(var_km.sum()) / 8.0)
+
+        # 6. trunk CoM from mean(CoP - CoM)
+        rob_c = dataclasses.replace(robot, mass=mass)
+        diffs_xy = []
+        p_F = robot.sensor_positions_in_foot()
+        for d in data:
+            fz = (d.f - zero) / gains
+            R_WB = quat_to_rotation(d.quat) @ R_BI.T
+            # yaw-free trunk frame: remove the trunk's heading
+            yaw = np.arctan2(R_WB[:, 1, 0], R_WB[:, 0, 0])
+            c, s_ = np.cos(-yaw), np.sin(-yaw)
+            Rz = np.zeros_like(R_WB)
+            Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s_, s_, c
+            Rz[:, 2, 2] = 1.0
+            R_H = Rz @ R_WB
+            com = center_of_mass(rob_c, np.zeros(3), R_H, d.q)
+            num = np.zeros((len(fz), 2))
+            for si, sd in enumerate(SIDES):
+                p_S, R_S = leg_fk(rob_c, sd, np.zeros(3), R_H, d.q[:, 6 * si : 6 * si + 6])
+                for k in range(4):
+                    pk = p_S + R_S @ np.array([p_F[k, 0], p_F[k, 1], 0.0])
+                    num += fz[:, 4 * si + k, None] * pk[:, :2]
+            tot = fz.sum(axis=1)
+            ok = tot > 0.5 * rob_c.weight
+            cop = num[ok] / tot[ok, None]
+            diffs_xy.append(cop - com[ok, :2])
+        dxy = np.concatenate(diffs_xy)
+        frac = robot.trunk_mass_fraction
+        d_com = dxy.mean(axis=0) / frac
+        sigma["trunk_com_m"] = float(
+            np.std(dxy) / frac / math.sqrt(max(1.0, len(dxy) * data[0].dt / 1.0))
+        )
+        rob_fit = dataclasses.replace(
+            robot, trunk_com_x=robot.trunk_com_x + float(d_com[0]),
+            trunk_com_y=robot.trunk_com_y + float(d_com[1]),
+        )
     return ModelCorrections(
         mass_kg=mass,
         trunk_com_x_m=float(robot.trunk_com_x + d_com[0]),

@@ -117,28 +117,41 @@ def plot_delays(df: pd.DataFrame, threshold_scale: float = 1.0):
 
 
 def plot_delay_vs_false_alarms(curve: pd.DataFrame):
-    """Median detection delay against false alarms per hour over the threshold scale."""
+    """Median detection delay (left) and detection rate (right) against false alarms per
+    hour over the threshold scale; points labelled ``×scale``.
+
+    Args:
+        curve: :func:`~grfguard.campaign.analysis.curve_table`.
+
+    Returns:
+        ``(fig, axes)``.
+    """
     import matplotlib.figure
 
-    fig = matplotlib.figure.Figure(figsize=(6.5, 4.2), layout="constrained")
-    ax = fig.subplots()
+    fig = matplotlib.figure.Figure(figsize=(11, 4.2), layout="constrained")
+    axes = fig.subplots(1, 2)
     for method, g in curve.groupby("method"):
         g = g.sort_values("threshold_scale")
         c = METHOD_COLORS.get(method)
         x = g["false_alarms_per_hour"].to_numpy(float)
         xerr = np.vstack([x - g["per_hour_lo"], g["per_hour_hi"] - x])
-        ax.errorbar(x, g["delay_median_s"], xerr=xerr, marker="o", capsize=3, color=c,
-                    label=method)
-        for _, r in g.iterrows():
-            ax.annotate(f"×{r['threshold_scale']:g} ({r['detection_rate']:.0%})",
-                        (r["false_alarms_per_hour"], r["delay_median_s"]), fontsize=7,
-                        xytext=(4, 3), textcoords="offset points", color=c)
-    ax.set_xscale("symlog", linthresh=1.0)
-    ax.set_xlabel("false alarms per hour of walking (95 % CI)")
-    ax.set_ylabel("median delay of detected faults [s]")
-    ax.set_title("threshold scale ×k (detection rate)")
-    ax.legend(fontsize=8)
-    return fig, ax
+        for ax, col in zip(axes, ("delay_median_s", "detection_rate"), strict=True):
+            ax.errorbar(x, g[col], xerr=xerr, capsize=3, color=c, label=method,
+                        **_STYLE.get(method, {}))
+            for _, r in g.iterrows():
+                if np.isfinite(r[col]):
+                    ax.annotate(f"×{r['threshold_scale']:g}", (r["false_alarms_per_hour"],
+                                r[col]), fontsize=7, xytext=(4, 3),
+                                textcoords="offset points", color=c)
+    for ax in axes:
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_xlabel("false alarms per hour of walking (95 % CI)")
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("median delay of detected faults [s]")
+    axes[1].set_ylabel("detection rate")
+    axes[1].set_ylim(-0.05, 1.05)
+    fig.suptitle("over the threshold scale ×k")
+    return fig, axes
 
 
 _CSS = """

@@ -228,6 +228,7 @@ def run_campaign(
                              t2 - t0, t2 - t1, address)
         store.log_run({**asdict(summary), "cells_per_min": summary.cells_per_min,
                        "workers": n_workers_seen, "campaign": spec.name,
+                       "load_avg_1min": os.getloadavg()[0],
                        "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
         return summary
     finally:

@@ -41,6 +41,8 @@ __all__ = ["Detector", "DetectorInputs", "DetectorStep", "VFS_TOTAL_COLUMNS"]
 
 _N = len(SENSOR_NAMES)
 _NAN = float("nan")
+_FLAG_COLS = tuple(flag_col(s) for s in SENSOR_NAMES)
+_KIND_COLS = tuple(kind_col(s) for s in SENSOR_NAMES)
 #: Which test wins when a flagged sensor alarms again (higher = more specific).
 _PRIORITY = {"nan": 4, "const": 3, "swing": 2, "corner": 1, "total": 1}
 #: Flags from these tests leave the reading without information.
@@ -95,6 +97,7 @@ class Detector:
         self.totals.reset()
         self.sensors = [SensorState() for _ in range(_N)]
         self._last_t = _NAN
+        self._sink = _Seen()  # written, never read, when diagnostics are off
 
     def _time(self, t: float) -> float:
         """A NaN time continues the clock by one period."""
@@ -121,12 +124,11 @@ class Detector:
 
     def _sensor_tests(
         self, i: int, t: float, xi: float, vi: float, tot_f: float, weight: float,
-        gates: tuple[bool, bool, bool], infoless_foot: bool, seen: _Seen,
+        swing_ok: bool, ss_ok: bool, loaded_ok: bool, infoless_foot: bool, seen: _Seen,
     ) -> str:
         """Constant, swing and corner tests of sensor ``i``; returns its alarm source."""
         th = self.config.thresholds
         s = self.sensors[i]
-        swing_ok, ss_ok, loaded_ok = gates
         if not math.isfinite(xi):
             s.repeats = 0
             s.last_reading_n = _NAN
@@ -225,18 +227,17 @@ class Detector:
         sens = self.sensors
         infoless = [any(sens[i].flag and sens[i].source in _INFOLESS_SOURCES
                         for i in range(4 * f, 4 * f + 4)) for f in range(2)]
-        seen = _Seen()
+        seen = _Seen() if self.config.diagnostics else self._sink
         alarms = [
-            self._sensor_tests(i, t, x[i], v[i], tot[i // 4], weight,
-                               (swing_ok[i // 4], ss_ok[i // 4], loaded_ok[i // 4]),
-                               infoless[i // 4], seen)
+            self._sensor_tests(i, t, x[i], v[i], tot[i // 4], weight, swing_ok[i // 4],
+                               ss_ok[i // 4], loaded_ok[i // 4], infoless[i // 4], seen)
             for i in range(_N)
         ]
         for f in range(2):
             if ss_ok[f] and math.isfinite(tot[f]) and math.isfinite(weight) and weight > 0:
                 self._foot_total(f, x, v, tot[f], weight, alarms, seen)
         cols: dict[str, Any] = {}
-        for i, name in enumerate(SENSOR_NAMES):
+        for i in range(_N):
             s = sens[i]
             if alarms[i]:
                 self._apply_alarm(s, alarms[i], t, x[i])
@@ -245,8 +246,8 @@ class Detector:
             if s.flag:
                 classify(s, t, x[i], self.config.thresholds.sigma_swing_n, self.tuning,
                          self.config.dt_s)
-            cols[flag_col(name)] = s.flag
-            cols[kind_col(name)] = s.kind
+            cols[_FLAG_COLS[i]] = s.flag
+            cols[_KIND_COLS[i]] = s.kind
         diag = self._diagnostics(seen, swing_ok, ss_ok) if self.config.diagnostics else {}
         return DetectorStep(cols, diag)
 

@@ -81,7 +81,7 @@ class ContactTimeline:
 
     def reset(self) -> None:
         """No contact history."""
-        self._c_prev = [_NAN, _NAN]
+        self._c_prev: list[bool | None] = [None, None]
         self.touchdown_s = [_NAN, _NAN]
         self.liftoff_s = [_NAN, _NAN]
         self.swing_duration_s = [_NAN, _NAN]
@@ -97,18 +97,19 @@ class ContactTimeline:
         return cv > self.tuning.contact_level
 
     def _record(self, f: int, t: float, cf: bool) -> None:
+        """Record a touchdown (and the swing duration) or a lift-off of foot ``f``."""
         prev = self._c_prev[f]
-        if math.isnan(prev):
+        if prev is None:  # first sample: the phase started before the log
             self.touchdown_s[f] = t if cf else _NAN
             self.liftoff_s[f] = _NAN if cf else t
-        elif cf and prev < 0.5:
+        elif cf and not prev:
             if math.isfinite(self.liftoff_s[f]):
                 self.swing_duration_s[f] = t - self.liftoff_s[f]
             self.touchdown_s[f] = t
-        elif (not cf) and prev > 0.5:
+        elif prev and not cf:
             self.liftoff_s[f] = t
             self._guard[f] = False
-        self._c_prev[f] = 1.0 if cf else 0.0
+        self._c_prev[f] = cf
 
     def expected_swing_s(self, f: int) -> float:
         """Expected swing duration of foot ``f`` (its last, else the other foot's) [s]."""

@@ -28,6 +28,10 @@ __all__ = ["PaperDetector"]
 
 _N = len(SENSOR_NAMES)
 _NAN = float("nan")
+_FLAG = tuple(flag_col(s) for s in SENSOR_NAMES)
+_KIND = tuple(kind_col(s) for s in SENSOR_NAMES)
+_ETA = tuple(eta_col(s) for s in SENSOR_NAMES)
+_REC = tuple(recovered_col(s) for s in SENSOR_NAMES)
 
 
 def _columns(
@@ -61,45 +65,60 @@ class PaperDetector:
         """Back to the start of the initialisation window."""
         self._obs = FaultObserver(_N, self.config.observer)
         self._t0 = _NAN
-        self._init_sum = np.zeros(_N)
-        self._init_cnt = np.zeros(_N, int)
+        self._init_sum = [0.0] * _N
+        self._init_cnt = [0] * _N
         self._init_done = False
 
     def _eta0(self) -> np.ndarray:
         """Mean residual of the initialisation window per sensor [N] (0 without data)."""
-        cnt = self._init_cnt
-        return np.where(cnt > 0, self._init_sum / np.maximum(cnt, 1), 0.0)
+        return np.array([self._init_sum[i] / self._init_cnt[i] if self._init_cnt[i] else 0.0
+                         for i in range(_N)])
 
     def step(self, t: float, x: Sequence[float], v: Sequence[float]) -> dict[str, Any]:
         """One sample: measured ``x`` and VFS ``v`` corner forces [N] at time ``t`` [s]."""
         c = self.config
-        xa, va = np.asarray(x, float), np.asarray(v, float)
         if math.isnan(self._t0) and math.isfinite(t):
             self._t0 = t
         in_init = not (math.isfinite(t) and t - self._t0 >= c.init_s)
         if in_init and not self._init_done:
-            e = xa - va
-            ok = np.isfinite(e)
-            self._init_sum = np.where(ok, self._init_sum + np.where(ok, e, 0.0), self._init_sum)
-            self._init_cnt = self._init_cnt + ok
-            rec = np.where(np.isfinite(xa), xa, np.where(np.isfinite(va), va, 0.0))
-            zeros = np.zeros(_N)
-            out = _columns(np.zeros(_N, bool), zeros, rec, zeros if c.diagnostics else None)
-            return self._scalars(out)
+            return self._init_step(x, v)
         if not self._init_done:
             eta0 = self._eta0()
             self._obs.eta_n = eta0.copy()
             self._obs.eta_filtered_n = eta0.copy()
             self._init_done = True
-        eta, force, etaf = self._obs.update(xa, va)
-        flags = np.abs(etaf) > np.asarray(c.thresholds.paper_eta_n)
-        rec = np.where(np.isfinite(force), force, 0.0)
-        return self._scalars(_columns(flags, eta, rec, etaf if c.diagnostics else None))
+        eta, force, etaf = self._obs.update(np.asarray(x, float), np.asarray(v, float))
+        th = c.thresholds.paper_eta_n
+        out: dict[str, Any] = {}
+        for i, s in enumerate(SENSOR_NAMES):
+            ef = float(etaf[i])
+            if c.diagnostics:
+                out[f"eta_filtered_{s}"] = ef
+            fl = abs(ef) > th[i]
+            out[_FLAG[i]] = fl
+            out[_KIND[i]] = "unknown" if fl else "none"
+            out[_ETA[i]] = float(eta[i])
+            r = float(force[i])
+            out[_REC[i]] = r if math.isfinite(r) else 0.0
+        return out
 
-    @staticmethod
-    def _scalars(out: dict[str, Any]) -> dict[str, Any]:
-        """0-d numpy values to plain Python values (bool, float, str)."""
-        return {k: np.asarray(v).item() for k, v in out.items()}
+    def _init_step(self, x: Sequence[float], v: Sequence[float]) -> dict[str, Any]:
+        """A sample of the initialisation window: accumulate the residual; the output is
+        the measurement (else the VFS, else 0), no flag."""
+        out: dict[str, Any] = {}
+        for i, s in enumerate(SENSOR_NAMES):
+            e = x[i] - v[i]
+            if math.isfinite(e):
+                self._init_sum[i] += e
+                self._init_cnt[i] += 1
+            if self.config.diagnostics:
+                out[f"eta_filtered_{s}"] = 0.0
+            out[_FLAG[i]] = False
+            out[_KIND[i]] = "none"
+            out[_ETA[i]] = 0.0
+            out[_REC[i]] = x[i] if math.isfinite(x[i]) else (
+                v[i] if math.isfinite(v[i]) else 0.0)
+        return out
 
     def _init_length(self, t: np.ndarray) -> int:
         """Number of leading samples in the initialisation window."""

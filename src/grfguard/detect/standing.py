@@ -134,19 +134,16 @@ class StandingDetector:
                 self._base = self._base_sum / self._base_n
             return self.flags, self.kinds
         dev = np.abs(np.where(np.isfinite(self._lp), self._lp - self._base, 0.0))
-        for i in range(_N):
-            if self.flags[i]:
-                continue
-            others = np.delete(dev, i)
-            if dev[i] > 0.5 * c.threshold_n and not np.isfinite(self._half_t[i]):
-                self._half_t[i] = self._t
-            isolated = dev[i] > c.isolation_ratio * float(np.median(others))
-            if dev[i] > c.threshold_n and isolated:
-                self._over_s[i] += self.dt_s
-            else:
-                self._over_s[i] = 0.0
-            if self._over_s[i] >= c.persist_s:
-                self.flags[i] = True
-                rise = self._t - self._half_t[i]
-                self.kinds[i] = "drift" if rise > c.drift_rise_s else "offset"
+        # median of the other seven deviations: the 4th or 5th smallest of all eight
+        order = np.sort(dev)
+        med_others = np.where(dev <= order[3], order[4], order[3])
+        half = (dev > 0.5 * c.threshold_n) & ~np.isfinite(self._half_t)
+        self._half_t[half] = self._t
+        over = (dev > c.threshold_n) & (dev > c.isolation_ratio * med_others) & ~self.flags
+        self._over_s = np.where(over, self._over_s + self.dt_s, 0.0)
+        new = np.flatnonzero((self._over_s >= c.persist_s) & ~self.flags)
+        for i in new:
+            self.flags[i] = True
+            rise = self._t - self._half_t[i]
+            self.kinds[i] = "drift" if rise > c.drift_rise_s else "offset"
         return self.flags, self.kinds

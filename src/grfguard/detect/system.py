@@ -50,6 +50,9 @@ class CommonModeConfig:
         max_cop_shift_m: Bound of the CoP shift used in the correction [m].
         min_load_fraction: A foot enters the fit when its virtual load exceeds this
             fraction of the weight.
+        outlier_n: A sensor whose residual misses the common pattern by more than this
+            [N] and by ``outlier_ratio`` times the median miss is left out of the sample.
+        outlier_ratio: See ``outlier_n``.
     """
 
     time_constant_s: float = 10.0
@@ -59,6 +62,8 @@ class CommonModeConfig:
     max_ratio: float = 0.15
     max_cop_shift_m: float = 0.05
     min_load_fraction: float = 0.2
+    outlier_n: float = 20.0
+    outlier_ratio: float = 4.0
 
     def __post_init__(self) -> None:
         o = "common_mode"
@@ -69,6 +74,8 @@ class CommonModeConfig:
         check_number(o, "max_ratio", self.max_ratio, 0.0, 1.0, "")
         check_number(o, "max_cop_shift_m", self.max_cop_shift_m, 0.0, 0.5, "m")
         check_number(o, "min_load_fraction", self.min_load_fraction, 0.0, 1.0, "")
+        check_number(o, "outlier_n", self.outlier_n, 0.0, 1e5, "N")
+        check_number(o, "outlier_ratio", self.outlier_ratio, 1.0, 100.0, "")
 
 
 @dataclass(frozen=True)
@@ -153,6 +160,13 @@ class CommonModeMonitor:
         phi = np.column_stack(
             [np.where(ok, v, 0.0), L * self._x / self._sx, L * self._y / self._sy]
         )
+        if use.sum() >= 3:
+            # a residual that stands out from the others is a sensor's, not the model's
+            e = np.abs((m - v) - phi @ self._theta)
+            e_use = e[use]
+            worst = int(np.flatnonzero(use)[np.argmax(e_use)])
+            if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(e_use))):
+                use[worst] = False
         if use.any() and not frozen:
             lam = math.exp(-self.dt_s / c.time_constant_s)
             P, r = phi[use], (m - v)[use]
@@ -271,7 +285,8 @@ class SystemAwareMonitor:
         cref = [f(row, f"contact_ref_{s}") for s in SIDES]
         cest = [f(src, f"contact_est_{s}") for s in SIDES]
         valid = [
-            (ce > 0.5) if math.isfinite(ce) else (cr > 0.5) for ce, cr in zip(cest, cref, strict=True)
+            (ce > 0.5) if math.isfinite(ce) else (cr > 0.5)
+            for ce, cr in zip(cest, cref, strict=True)
         ]
         cm = self.common.update(x, v, valid, frozen=any(self._last_flags))
         vc = [vi + float(ci) for vi, ci in zip(v, cm.correction_n, strict=True)]

@@ -21,8 +21,12 @@ corners in contact ``K``. The forces solve
 
 With a small ``w`` the total force and the ZMP are met and the prior only picks the
 remaining freedom (for the affine part of the prior the constraints override it). Solved
-exactly per sample as a non-negative least-squares problem (``scipy.optimize.nnls``) with
-the equality as a heavily weighted row, then rescaled to the exact sum.
+per sample as a non-negative least-squares problem (``scipy.optimize.nnls``) with the
+equality as a heavily weighted row, then rescaled so the sum is exact. Measured against the
+exact optimum (every free set of the KKT conditions, as in
+:mod:`grfguard.estimate.corner_qp`, on a 12 s default walk): at most 2.1e-9 N apart and
+never a worse objective; the exact enumeration took twice as long in batch, so the NNLS
+stays. ``tests/test_corner_qp.py`` checks the gap against daqp.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The virtual force sensor (VFS): corner forces from IMU, encoders and the robot model.
 
-Pipeline per sample (DESIGN.md, "Pipeline"):
+Pipeline (DESIGN.md, "Pipeline"):
 
 1. attitude (:class:`grfguard.estimate.kinematic.AttitudeFilter`): gyro integration pulled
    toward the logged IMU quaternion (its 1 mrad jitter would become fake accelerations);
@@ -15,12 +15,17 @@ Pipeline per sample (DESIGN.md, "Pipeline"):
    reads the force sensors through the measured ZMP);
 5. split (:mod:`grfguard.estimate.legs`, :mod:`grfguard.estimate.compliance`): contact per
    corner from the kinematic heights, one QP over all corners in contact with the total
-   force, the ZMP and a sole-compliance prior (``qp``, default), or the paper's alpha rule
-   and eq. 10-12 (``paper``).
+   force, the ZMP and a sole-compliance prior (``qp``, default; the rigid QP of
+   :mod:`grfguard.estimate.corner_qp` without the prior), or the paper's alpha rule and
+   eq. 10-12 (``paper``, per-foot QPs of :mod:`grfguard.estimate.corner_qp`).
 
-:class:`VirtualForceSensor` streams (``update``) and batches (``run``); both give the same
-numbers. A sample with a non-finite input is skipped (the state does not move), the last
-output is held and ``vfs_valid`` is 0.
+Each step is a stage method over ``(T, ...)`` arrays (``_attitude``, ``forward_batch``,
+``_odometry``, ``_momentum`` or ``_paper_momentum``, ``_split``, wired by ``_process``);
+stateful stages carry their state (filters, the last samples of the finite differences)
+between calls. :class:`VirtualForceSensor` batches (``run``: T = the whole log) and streams
+(``update``: the same stages with T = 1), so both give the same numbers (to rounding). A
+sample with a non-finite input is skipped (the state does not move), the last output is
+held and ``vfs_valid`` is 0.
 
 Outputs: ``vfs_<s>`` for r1..r4, l1..l4 [N], ``com_est_x/y/z`` [m], ``vfs_total_r/l`` [N],
 ``vfs_cop_r_x/y``, ``vfs_cop_l_x/y`` [m, world; NaN when the foot carries < 1 N],
@@ -30,6 +35,7 @@ Outputs: ``vfs_<s>`` for r1..r4, l1..l4 [N], ``com_est_x/y/z`` [m], ``vfs_total_
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -43,11 +49,7 @@ from grfguard.estimate.com import (
     ZMPKalmanFilter,
     zmp_from_momentum,
 )
-from grfguard.estimate.compliance import (
-    compliance_prior,
-    solve_with_prior,
-    split_with_prior,
-)
+from grfguard.estimate.compliance import split_with_prior
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.kinematic import (
     AttitudeFilter,
@@ -150,6 +152,35 @@ def _outputs(
     return out
 
 
+@dataclass
+class _Inputs:
+    """The inputs of T samples, (T, k) arrays; optional ones None when absent."""
+
+    q: np.ndarray  # joint angles [rad]
+    quat: np.ndarray  # IMU attitude (w, x, y, z)
+    gyro: np.ndarray | None  # [rad/s]
+    stance: np.ndarray | None  # planned contact (right, left), 0/1
+    acc: np.ndarray | None  # IMU specific force [m/s^2]
+    forces: np.ndarray | None  # corner force sensors [N] (the paper's CoM filter only)
+    zmp_ref: np.ndarray | None  # planned ZMP [m] (the paper's CoM filter only)
+
+    def valid(self) -> np.ndarray:
+        """(T,) samples whose inputs are all finite with a non-zero quaternion.
+
+        The planned ZMP is optional (non-finite: not used) and does not count.
+        """
+        parts = [self.q, self.quat] + [
+            p for p in (self.gyro, self.stance, self.acc, self.forces) if p is not None
+        ]
+        ok = np.all(np.concatenate([np.isfinite(p) for p in parts], axis=1), axis=1)
+        return ok & (np.linalg.norm(np.nan_to_num(self.quat), axis=1) >= 1e-6)
+
+    def take(self, idx: np.ndarray) -> _Inputs:
+        """The samples ``idx``."""
+        vals = (getattr(self, f.name) for f in fields(self))
+        return _Inputs(*(None if v is None else v[idx] for v in vals))
+
+
 class VirtualForceSensor:
     """Virtual foot force sensor, streaming (``update``) and batch (``run``).
 
@@ -203,8 +234,7 @@ class VirtualForceSensor:
         self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 9)
         self._lp_fuse = CausalLowPass(c.fusion_cutoff, c.dt, c.filter_order, 3)
         self._lp_acc = CausalLowPass(c.acc_cutoff, c.dt, c.filter_order, 3)
-        self._hist_I: list[np.ndarray] = []
-        self._hist_C: list[np.ndarray] = []
+        self._hist: dict[str, np.ndarray] = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
         self._prev_frames: KinematicFrames | None = None
         self._prev_L: np.ndarray | None = None
         self._paper: PaperCoMFilter | None = None
@@ -212,7 +242,7 @@ class VirtualForceSensor:
         self._p_act_prev: np.ndarray | None = None
         self._last: dict[str, float] | None = None
 
-    # ------------------------------------------------------------------ input helpers
+    # ------------------------------------------------------------------ inputs
     def _check_columns(self, cols: Any) -> None:
         need = [*IMU_QUAT, *JOINT_COLUMNS]
         if self.config.com_method == "paper":
@@ -226,6 +256,39 @@ class VirtualForceSensor:
                 "in grfguard.io.schema (com_method='paper' also needs imu_acc_* and force_*)"
             )
 
+    def _inputs(self, src: pd.DataFrame | Mapping[str, float]) -> _Inputs:
+        """Parse a log (T rows) or one sample (a mapping, T = 1) into (T, k) arrays.
+
+        Raises:
+            KeyError, TypeError, ValueError: A mapping misses a needed key or has a
+                non-numeric value (``update`` then holds its last output).
+        """
+        c = self.config
+        frame = isinstance(src, pd.DataFrame)
+        has = (lambda cols: all(k in src.columns for k in cols)) if frame else (
+            lambda cols: all(k in src for k in cols)
+        )
+
+        def take(cols: tuple[str, ...]) -> np.ndarray:
+            if frame:
+                return src[list(cols)].to_numpy(float)
+            return np.array([[float(src[k]) for k in cols]])
+
+        paper = c.com_method == "paper"
+        inp = _Inputs(
+            q=take(JOINT_COLUMNS),
+            quat=take(IMU_QUAT),
+            gyro=take(IMU_GYRO) if has(IMU_GYRO) else None,
+            stance=take(CONTACT_REF) if has(CONTACT_REF) else None,
+            acc=take(IMU_ACC) if paper or c.use_accelerometer else None,
+            forces=take(FORCE_COLUMNS) if paper else None,
+            zmp_ref=None,
+        )
+        if paper:
+            n = inp.q.shape[0]
+            inp.zmp_ref = take(ZMP_REF) if has(ZMP_REF) else np.full((n, 2), np.nan)
+        return inp
+
     def _stance_fallback(self, p_AK: np.ndarray) -> np.ndarray:
         """Planned stance when the log has no contact_ref: feet within 1 cm of the lowest."""
         z = p_AK[..., 2].reshape(p_AK.shape[:-2] + (2, 4)).min(axis=-1)
@@ -233,7 +296,7 @@ class VirtualForceSensor:
 
     # ------------------------------------------------------------------ streaming
     def update(self, row: Mapping[str, float]) -> dict[str, float]:
-        """Process one sample.
+        """Process one sample: the stages of :meth:`run` with T = 1.
 
         Args:
             row: Mapping with the log-contract columns of one sample.
@@ -243,61 +306,14 @@ class VirtualForceSensor:
             non-finite input is skipped: the last output is returned with
             ``vfs_valid = 0`` (NaN before the first valid sample).
         """
-        c = self.config
         try:
-            q = np.array([float(row[k]) for k in JOINT_COLUMNS])
-            quat = np.array([float(row[k]) for k in IMU_QUAT])
-            extra = {}
-            if c.com_method == "paper" or c.use_accelerometer:
-                extra["acc"] = np.array([float(row[k]) for k in IMU_ACC])
-            if c.com_method == "paper":
-                extra["forces"] = np.array([float(row[k]) for k in FORCE_COLUMNS])
-                zr = [row.get(k, np.nan) for k in ZMP_REF]
-                extra["zmp_ref"] = np.array([float(v) for v in zr])
-            gyro = (
-                np.array([float(row[k]) for k in IMU_GYRO])
-                if all(k in row for k in IMU_GYRO)
-                else None
-            )
-            if all(k in row for k in CONTACT_REF):
-                stance = np.array([float(row[k]) for k in CONTACT_REF])
-            else:
-                stance = None
+            inp = self._inputs(row)
         except (KeyError, TypeError, ValueError):
             return self._hold()
-        vals = [q, quat] + [v for k, v in extra.items() if k != "zmp_ref"]
-        if stance is not None:
-            vals.append(stance)
-        if gyro is not None:
-            vals.append(gyro)
-        if not all(np.all(np.isfinite(v)) for v in vals) or np.linalg.norm(quat) < 1e-6:
+        if not inp.valid()[0]:
             return self._hold()
-        quat = self._att.update(quat, gyro)
-        fr = self.kin.forward(q, quat)
-        st = (stance > 0.5) if stance is not None else self._stance_fallback(fr.p_AK)
-        R_corr, p_WT, ground, _ = self._odo.update(fr.p_AK, fr.p_AS, fr.R_WS, st)
-        fr = rotate_frames(fr, R_corr)
-        com_W = p_WT + fr.p_AC
-        p_WK = p_WT[None, :] + fr.p_AK
-        if c.com_method == "multibody":
-            raw = self._raw_rates(p_WT + fr.p_AI, fr.p_AC - fr.p_AI, fr)
-            acc_W = None
-            if c.use_accelerometer:
-                acc_W = quat_to_matrix(quat) @ extra["acc"] - np.array([0.0, 0.0, self.g])
-            c_dd, ld = self._filter_rates(
-                raw[None], None if acc_W is None else acc_W[None], stream=True
-            )
-            force = self.mass * (c_dd[0] + np.array([0.0, 0.0, self.g]))
-            zmp = self._zmp(com_W[None], force[None], ld, np.array([ground]))[0]
-            com_out = com_W
-        else:
-            com_out, force, zmp = self._paper_step(
-                fr, p_WT, p_WK, com_W, ground, quat, extra["acc"], extra["forces"],
-                extra["zmp_ref"],
-            )
-        forces, contact = self._split_one(fr, p_WT, p_WK, com_out, ground, force, zmp, st)
-        out = _outputs(forces, p_WK[:, :2], com_out, contact, zmp)
-        res = {k: float(v) for k, v in out.items()}
+        out = self._process(inp)
+        res = {k: float(v[0]) for k, v in out.items()}
         res["vfs_valid"] = 1.0
         self._last = res
         return dict(res)
@@ -310,40 +326,127 @@ class VirtualForceSensor:
         res["vfs_valid"] = 0.0
         return res
 
+    # ------------------------------------------------------------------ batch
+    def run(self, log: pd.DataFrame) -> pd.DataFrame:
+        """Reset, then process the whole log (vectorized where it pays).
+
+        Args:
+            log: Log-contract DataFrame.
+
+        Returns:
+            DataFrame with :data:`VFS_OUTPUT_COLUMNS`, same index as ``log``.
+        """
+        self.reset()
+        self._check_columns(log.columns)
+        n = len(log)
+        inp = self._inputs(log)
+        valid = inp.valid()
+        idx = np.flatnonzero(valid)
+        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
+        result["vfs_valid"] = valid.astype(float)
+        if idx.size == 0:
+            return pd.DataFrame(result, index=log.index)
+        out = self._process(inp.take(idx))
+        # skipped samples hold the output of the last valid one
+        pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
+        has = pos >= 0
+        for k, v in out.items():
+            col = np.full(n, np.nan)
+            col[has] = np.asarray(v, float)[pos[has]]
+            result[k] = col
+        self._last = {k: float(result[k][idx[-1]]) for k in VFS_OUTPUT_COLUMNS}
+        self._last["vfs_valid"] = 1.0
+        return pd.DataFrame(result, index=log.index)
+
+    # ------------------------------------------------------------------ stages
+    def _process(self, inp: _Inputs) -> dict[str, np.ndarray]:
+        """All stages over T valid samples (T = 1 when streaming): (T,) output columns."""
+        quat = self._attitude(inp.quat, inp.gyro)
+        fr = self.kin.forward_batch(inp.q, quat)
+        st = inp.stance > 0.5 if inp.stance is not None else self._stance_fallback(fr.p_AK)
+        fr, p_WT, ground = self._odometry(fr, st)
+        com_W = p_WT + fr.p_AC
+        p_WK = p_WT[:, None, :] + fr.p_AK
+        if self.config.com_method == "multibody":
+            com_out = com_W
+            force, zmp = self._momentum(fr, p_WT, com_W, ground, quat, inp.acc)
+        else:
+            com_out, force, zmp = self._paper_momentum(p_WK, com_W, ground, quat, inp)
+        forces, feet = self._split(fr, p_WT, p_WK, com_out, ground, force, zmp, st)
+        return _outputs(forces, p_WK[:, :, :2], com_out, feet, zmp)
+
+    def _attitude(self, quat: np.ndarray, gyro: np.ndarray | None) -> np.ndarray:
+        """Filtered IMU attitude (T, 4) (stateful: one filter step per sample)."""
+        out = np.empty_like(quat)
+        for i in range(quat.shape[0]):
+            out[i] = self._att.update(quat[i], None if gyro is None else gyro[i])
+        return out
+
+    def _odometry(
+        self, fr: KinematicFrames, st: np.ndarray
+    ) -> tuple[KinematicFrames, np.ndarray, np.ndarray]:
+        """Leg odometry: frames rotated by the anchor correction, trunk position (T, 3) [m]
+        and ground height (T,) [m] (stateful)."""
+        m = st.shape[0]
+        p_WT, ground, R_corr = np.empty((m, 3)), np.empty(m), np.empty((m, 3, 3))
+        for i in range(m):
+            R_corr[i], p_WT[i], ground[i], _ = self._odo.update(
+                fr.p_AK[i], fr.p_AS[i], fr.R_WS[i], st[i]
+            )
+        return rotate_frames(fr, R_corr), p_WT, ground
+
+    def _momentum(
+        self, fr: KinematicFrames, p_WT: np.ndarray, com_W: np.ndarray, ground: np.ndarray,
+        quat: np.ndarray, acc: np.ndarray | None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Multibody momentum: total ground force (T, 3) [N] and ZMP (T, 2) [m]."""
+        raw = self._raw_rates(p_WT + fr.p_AI, fr.p_AC - fr.p_AI, fr)
+        acc_W = None
+        if self.config.use_accelerometer:
+            acc_W = np.einsum("tij,tj->ti", quat_to_matrix(quat), acc)
+            acc_W = acc_W - np.array([0.0, 0.0, self.g])
+        c_dd, ld = self._filter_rates(raw, acc_W)
+        force = self.mass * (c_dd + np.array([0.0, 0.0, self.g]))
+        return force, self._zmp(com_W, force, ld, ground)
+
     def _raw_rates(self, p_WI: np.ndarray, p_IC: np.ndarray, fr: KinematicFrames) -> np.ndarray:
-        """Raw (unfiltered) rates of one sample: (9,) = [d2 p_IC, L_dot, d2 p_WI]."""
-        dt = self.config.dt
-        hI, hC = self._hist_I, self._hist_C
-        hI.append(p_WI)
-        hC.append(p_IC)
-        if len(hI) > 3:
-            del hI[0], hC[0]
-        raw = np.zeros(9)
-        if len(hI) == 3:
-            for off, h in ((0, hC), (6, hI)):
-                v1 = (h[2] - h[1]) / dt
-                v0 = (h[1] - h[0]) / dt
-                raw[off : off + 3] = (v1 - v0) / dt
-        L = None
-        if self._prev_frames is not None:
-            L = angular_momentum_about_com(
-                fr.p_AB[None], fr.R_WB[None], self._prev_frames.p_AB[None],
-                self._prev_frames.R_WB[None], self.kin.body_mass, self.kin.body_inertia, dt,
-            )[0]
-            if self._prev_L is not None:
-                raw[3:6] = (L - self._prev_L) / dt
-        self._prev_frames, self._prev_L = fr, L
+        """Raw (unfiltered) rates (T, 9) = [d2 p_IC, L_dot, d2 p_WI] by finite differences.
+
+        The last two positions, the last frame and the last angular momentum carry over
+        between calls, so T samples at once and T calls with one sample give the same
+        numbers; the first two samples after a reset have no rate (zero).
+        """
+        dt, T = self.config.dt, p_WI.shape[0]
+        raw = np.zeros((T, 9))
+        for off, key, x in ((0, "C", p_IC), (6, "I", p_WI)):
+            h = self._hist[key].shape[0]
+            xs = np.concatenate([self._hist[key], x])
+            v = (xs[1:] - xs[:-1]) / dt
+            r0 = max(0, 2 - h)
+            raw[r0:, off : off + 3] = ((v[1:] - v[:-1]) / dt)[h + r0 - 2 :]
+            self._hist[key] = xs[-2:]
+        prev = self._prev_frames
+        hf = 0 if prev is None else 1
+        pB = fr.p_AB if prev is None else np.concatenate([prev.p_AB[-1:], fr.p_AB])
+        RB = fr.R_WB if prev is None else np.concatenate([prev.R_WB[-1:], fr.R_WB])
+        L_new = angular_momentum_about_com(
+            pB[1:], RB[1:], pB[:-1], RB[:-1], self.kin.body_mass, self.kin.body_inertia, dt
+        )
+        hl = 0 if self._prev_L is None else 1
+        Ls = L_new if self._prev_L is None else np.concatenate([self._prev_L, L_new])
+        raw[2 - hl - hf :, 3:6] = (Ls[1:] - Ls[:-1]) / dt
+        self._prev_frames = fr
+        self._prev_L = Ls[-1:] if Ls.shape[0] else None
         return raw
 
     def _filter_rates(
-        self, raw: np.ndarray, acc_W: np.ndarray | None, stream: bool
+        self, raw: np.ndarray, acc_W: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray]:
         """CoM acceleration (T, 3) and angular momentum rate (T, 3) from raw rates (T, 9)."""
         c = self.config
-        run = (lambda f, x: f.update(x[0])[None]) if stream else (lambda f, x: f.run(x))
-        main = run(self._lp, raw)
+        main = self._lp.run(raw)
         if acc_W is not None:
-            c_dd = run(self._lp_acc, acc_W) + run(self._lp_fuse, raw[:, 6:9] - acc_W)
+            c_dd = self._lp_acc.run(acc_W) + self._lp_fuse.run(raw[:, 6:9] - acc_W)
             c_dd = c_dd + main[:, 0:3]
             if not c.accelerometer_vertical:
                 c_dd[:, 2] = main[:, 2] + main[:, 8]
@@ -379,8 +482,23 @@ class VirtualForceSensor:
             )
         return self._paper
 
+    def _paper_momentum(
+        self, p_WK: np.ndarray, com_W: np.ndarray, ground: np.ndarray, quat: np.ndarray,
+        inp: _Inputs,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The paper's LIPM filter: CoM (T, 3) [m], ground force (T, 3) [N], ZMP (T, 2) [m]."""
+        m = com_W.shape[0]
+        com_out, force, zmp = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2))
+        for i in range(m):
+            com_out[i], force[i], zmp[i] = self._paper_step(
+                p_WK[i], com_W[i], float(ground[i]), quat[i], inp.acc[i], inp.forces[i],
+                inp.zmp_ref[i],
+            )
+        return com_out, force, zmp
+
     def _paper_step(
-        self, fr, p_WT, p_WK, com_W, ground, quat, acc, forces, zmp_ref
+        self, p_WK: np.ndarray, com_W: np.ndarray, ground: float, quat: np.ndarray,
+        acc: np.ndarray, forces: np.ndarray, zmp_ref: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         kf = self._paper_filter(float(com_W[2] - ground))
         fsum = forces.sum()
@@ -400,26 +518,23 @@ class VirtualForceSensor:
         zmp = c_hat - zc * c_dd / self.g
         return com_out, force, zmp
 
-    def _split_one(self, fr, p_WT, p_WK, com, ground, force, zmp, st):
+    def _split(
+        self, fr: KinematicFrames, p_WT: np.ndarray, p_WK: np.ndarray, com: np.ndarray,
+        ground: np.ndarray, force: np.ndarray, zmp: np.ndarray, st: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Corner forces (T, 8) [N] and feet in contact (T, 2)."""
         c = self.config
-        if c.split_method == "qp":
-            h = p_WK[:, 2] - ground
-            contact = corner_contact(h, st, c.contact_height, c.kinematic_contact)
-            if self.contact_stiffness > 0:
-                fz = float(force[2])
-                prior = compliance_prior(p_WK[:, 2], contact, fz, self.contact_stiffness)
-                forces = solve_with_prior(p_WK[:, :2] - zmp, prior, fz, c.qp_weight, contact)
-            else:
-                forces = split_qp(
-                    p_WK[None, :, :2], contact[None], zmp[None], force[2:3], c.qp_weight
-                )[0]
-            feet = contact.reshape(2, 4).any(axis=1)
-            return forces, feet
-        forces = self._split_paper(
-            fr.p_AS[None] + p_WT[None, None, :], fr.R_WS[None], com[None], force[None],
-            st[None],
-        )[0]
-        return forces, np.asarray(st, bool)
+        if c.split_method == "paper":
+            return self._split_paper(fr.p_AS + p_WT[:, None, :], fr.R_WS, com, force, st), st
+        h = p_WK[:, :, 2] - ground[:, None]
+        contact = corner_contact(h, st, c.contact_height, c.kinematic_contact)
+        if self.contact_stiffness > 0:
+            forces = split_with_prior(
+                p_WK, contact, zmp, force[:, 2], c.qp_weight, self.contact_stiffness
+            )
+        else:
+            forces = split_qp(p_WK[:, :, :2], contact, zmp, force[:, 2], c.qp_weight)
+        return forces, contact.reshape(-1, 2, 4).any(axis=2)
 
     def _split_paper(self, p_WS, R_WS, com, force, st) -> np.ndarray:
         """Paper split for (T, ...) arrays."""
@@ -440,137 +555,16 @@ class VirtualForceSensor:
         cop_F = world_to_foot_xy(cop_W, R_WS)
         return split_paper_feet(cop_F, legs[..., 2], self.points_F, c.qp_weight)
 
-    # ------------------------------------------------------------------ batch
-    def run(self, log: pd.DataFrame) -> pd.DataFrame:
-        """Reset, then process the whole log (vectorized where it pays).
-
-        Args:
-            log: Log-contract DataFrame.
-
-        Returns:
-            DataFrame with :data:`VFS_OUTPUT_COLUMNS`, same index as ``log``.
-        """
-        self.reset()
-        self._check_columns(log.columns)
-        c = self.config
-        n = len(log)
-        q_all = log[list(JOINT_COLUMNS)].to_numpy(float)
-        quat_all = log[list(IMU_QUAT)].to_numpy(float)
-        has_ref = all(k in log.columns for k in CONTACT_REF)
-        parts = [q_all, quat_all]
-        has_gyro = all(k in log.columns for k in IMU_GYRO)
-        if has_gyro:
-            gyro_all = log[list(IMU_GYRO)].to_numpy(float)
-            parts.append(gyro_all)
-        if has_ref:
-            st_all = log[list(CONTACT_REF)].to_numpy(float)
-            parts.append(st_all)
-        if c.com_method == "multibody" and c.use_accelerometer:
-            parts.append(log[list(IMU_ACC)].to_numpy(float))
-        if c.com_method == "paper":
-            acc_all = log[list(IMU_ACC)].to_numpy(float)
-            f_all = log[list(FORCE_COLUMNS)].to_numpy(float)
-            parts += [acc_all, f_all]
-            if all(k in log.columns for k in ZMP_REF):
-                zr_all = log[list(ZMP_REF)].to_numpy(float)
-            else:
-                zr_all = np.full((n, 2), np.nan)
-        valid = np.all(np.concatenate([np.isfinite(p) for p in parts], axis=1), axis=1)
-        valid &= np.linalg.norm(np.nan_to_num(quat_all), axis=1) >= 1e-6
-        idx = np.flatnonzero(valid)
-        m = idx.size
-        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
-        result["vfs_valid"] = valid.astype(float)
-        if m == 0:
-            return pd.DataFrame(result, index=log.index)
-        quat_f = np.empty((m, 4))
-        att = self._att
-        for i, j in enumerate(idx):
-            quat_f[i] = att.update(quat_all[j], gyro_all[j] if has_gyro else None)
-        fr = self.kin.forward_batch(q_all[idx], quat_f)
-        if has_ref:
-            st = st_all[idx] > 0.5
-        else:
-            st = self._stance_fallback(fr.p_AK)
-        p_WT = np.empty((m, 3))
-        ground = np.empty(m)
-        R_corr = np.empty((m, 3, 3))
-        odo = self._odo
-        for i in range(m):
-            R_corr[i], p_WT[i], ground[i], _ = odo.update(
-                fr.p_AK[i], fr.p_AS[i], fr.R_WS[i], st[i]
-            )
-        fr = rotate_frames(fr, R_corr)
-        com_W = p_WT + fr.p_AC
-        p_WK = p_WT[:, None, :] + fr.p_AK
-        dt = c.dt
-        if c.com_method == "multibody":
-            raw = np.zeros((m, 9))
-            for off, x in ((0, fr.p_AC - fr.p_AI), (6, p_WT + fr.p_AI)):
-                v = np.zeros((m, 3))
-                v[1:] = (x[1:] - x[:-1]) / dt
-                raw[2:, off : off + 3] = (v[2:] - v[1:-1]) / dt
-            L = np.zeros((m, 3))
-            if m > 1:
-                L[1:] = angular_momentum_about_com(
-                    fr.p_AB[1:], fr.R_WB[1:], fr.p_AB[:-1], fr.R_WB[:-1],
-                    self.kin.body_mass, self.kin.body_inertia, dt,
-                )
-            raw[2:, 3:6] = (L[2:] - L[1:-1]) / dt
-            acc_W = None
-            if c.use_accelerometer:
-                acc_all = log[list(IMU_ACC)].to_numpy(float)[idx]
-                acc_W = np.einsum("tij,tj->ti", quat_to_matrix(quat_f), acc_all)
-                acc_W = acc_W - np.array([0.0, 0.0, self.g])
-            c_dd, ld = self._filter_rates(raw, acc_W, stream=False)
-            force = self.mass * (c_dd + np.array([0.0, 0.0, self.g]))
-            zmp = self._zmp(com_W, force, ld, ground)
-            com_out = com_W
-        else:
-            com_out = np.empty((m, 3))
-            force = np.empty((m, 3))
-            zmp = np.empty((m, 2))
-            quat_v, acc_v, f_v, zr_v = quat_f, acc_all[idx], f_all[idx], zr_all[idx]
-            for i in range(m):
-                co, fo, zm = self._paper_step(
-                    None, p_WT[i], p_WK[i], com_W[i], ground[i], quat_v[i], acc_v[i], f_v[i],
-                    zr_v[i],
-                )
-                com_out[i], force[i], zmp[i] = co, fo, zm
-        if c.split_method == "qp":
-            h = p_WK[:, :, 2] - ground[:, None]
-            contact = corner_contact(h, st, c.contact_height, c.kinematic_contact)
-            if self.contact_stiffness > 0:
-                forces = split_with_prior(
-                    p_WK, contact, zmp, force[:, 2], c.qp_weight, self.contact_stiffness
-                )
-            else:
-                forces = split_qp(p_WK[:, :, :2], contact, zmp, force[:, 2], c.qp_weight)
-            feet = contact.reshape(m, 2, 4).any(axis=2)
-        else:
-            forces = self._split_paper(
-                fr.p_AS + p_WT[:, None, :], fr.R_WS, com_out, force, st
-            )
-            feet = st
-        out = _outputs(forces, p_WK[:, :, :2], com_out, feet, zmp)
-        # skipped samples hold the output of the last valid one
-        pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
-        has = pos >= 0
-        for k, v in out.items():
-            col = np.full(n, np.nan)
-            col[has] = np.asarray(v, float)[pos[has]]
-            result[k] = col
-        self._last = {k: float(result[k][idx[-1]]) for k in VFS_OUTPUT_COLUMNS}
-        self._last["vfs_valid"] = 1.0
-        return pd.DataFrame(result, index=log.index)
-
 
 def with_vfs_columns(log: pd.DataFrame, config: VFSConfig | None = None) -> pd.DataFrame:
     """``log`` plus the virtual sensor's output columns (metadata kept).
 
-    A :class:`~grfguard.detect.monitor.Monitor` given such a log reuses the columns
-    instead of running the virtual sensor again (handy when several fault scenarios are
-    injected into one walk: the default virtual sensor does not read the force sensors).
+    ``Monitor.for_log`` (:mod:`grfguard.detect`) reuses ``vfs_*`` and ``vfs_total_*``
+    columns when the log has them, whatever its ``config.vfs`` says: compute them with the
+    virtual sensor the monitor is meant to use. Reusing them for several fault scenarios
+    injected into one walk is valid only for a virtual sensor that does not read the force
+    sensors (the default; ``com_method="paper"`` reads them, so its columns belong to the
+    log they were computed on).
 
     Args:
         log: A log of the contract.

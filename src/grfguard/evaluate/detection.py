@@ -94,13 +94,18 @@ def _stance(log: pd.DataFrame, side: str) -> np.ndarray | None:
     return sum(log[c].to_numpy(dtype=float) for c in cols) > _STANCE_LOAD_N
 
 
+def _nanmean(x: np.ndarray) -> float:
+    """Mean ignoring NaN; NaN (without a warning) when nothing is left."""
+    return float(np.nanmean(x)) if np.any(~np.isnan(x)) else np.nan
+
+
 def _rmse_between(a: pd.Series, b: pd.Series, mask: np.ndarray, finite: bool) -> float:
     """RMSE of ``a - b`` over ``mask`` [N] (``finite``: ignore non-finite differences)."""
     d = a.to_numpy(dtype=float)[mask] - b.to_numpy(dtype=float)[mask]
     if finite:
         d = d[np.isfinite(d)]
         return float(np.sqrt(np.mean(d**2))) if d.size else np.nan
-    return float(np.sqrt(np.nanmean(d**2))) if d.size else np.nan
+    return float(np.sqrt(_nanmean(d**2)))
 
 
 def _empty_row(sensor: str, wins: list[tuple[float, float, str]]) -> dict[str, object]:
@@ -168,9 +173,9 @@ def sensor_detection(
     a0, b0, kind0 = wins[0]
     last = (t >= b0 - _SIZE_WINDOW_S) & (t < b0)
     if fault_col(s) in log.columns:
-        row["true_size_n"] = float(np.nanmean(log[fault_col(s)].to_numpy(dtype=float)[last]))
+        row["true_size_n"] = _nanmean(log[fault_col(s)].to_numpy(dtype=float)[last])
     if eta_col(s) in out.columns:
-        row["estimated_size_n"] = float(np.nanmean(out[eta_col(s)].to_numpy(dtype=float)[last]))
+        row["estimated_size_n"] = _nanmean(out[eta_col(s)].to_numpy(dtype=float)[last])
     sel = (t >= a0) & (t < b0 + tolerance_s) & flag
     row["detected"] = bool(sel.any())
     if not row["detected"]:

@@ -217,12 +217,16 @@ def _check_metadata(meta: Any, path: Path) -> None:
     robot = meta.get("robot")
     if robot is None or isinstance(robot, str):
         return
+    if isinstance(robot, dict) and ("model" in robot or "sensing" in meta):
+        return  # a described robot (Talos, G1, ...): checked by io.robot_schema
     if not isinstance(robot, dict):
         raise LogFormatError(
             f"{path}: metadata key 'robot' must be a JSON object with the robot "
             f"parameters, got {type(robot).__name__} {_short(repr(robot), 60)}; remove it "
             "and pass the robot with --robot ROBOT.toml"
         )
+    if "model" in robot:  # a described robot (Talos, G1, ...): checked by io.robot_schema
+        return
     from grfguard.errors import ConfigError
     from grfguard.model.robot import RobotConfig
 

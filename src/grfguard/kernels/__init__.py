@@ -5,6 +5,7 @@ as one step function over plain arrays, streamed sample by sample or looped over
   :class:`grfguard.estimate.vfs.VirtualForceSensor` (``update``/``run``, plus the array
   call ``update_array``); ``Monitor(config, CompiledVirtualForceSensor.for_log(log))``.
 * :func:`vfs_batch`: compiled ``VirtualForceSensor.for_log(log).run(log)``.
+* :func:`compiled_monitor`: ``Monitor.for_log`` with the compiled sensor inside.
 * :func:`warm_up`: compile or load the cache before the first sample.
 
 Array layouts: :data:`IN_COLUMNS`, :data:`OUT_COLUMNS` (:mod:`grfguard.kernels.vfs`).
@@ -13,6 +14,7 @@ Array layouts: :data:`IN_COLUMNS`, :data:`OUT_COLUMNS` (:mod:`grfguard.kernels.v
 from __future__ import annotations
 
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
+from grfguard.kernels.monitor import compiled_monitor
 from grfguard.kernels.vfs import (
     IN_COLUMNS,
     OUT_COLUMNS,
@@ -27,4 +29,5 @@ from grfguard.kernels.warmup import warm_up
 __all__ = [
     "TreeModel", "fk_tree", "fk_sites", "IN_COLUMNS", "OUT_COLUMNS",
     "CompiledVirtualForceSensor", "VFSKernel", "vfs_batch", "vfs_run", "vfs_step", "warm_up",
+    "compiled_monitor",
 ]

@@ -223,16 +223,20 @@ def _local2global(xpos_out, xmat_out, pos, quat, body, sameframe, xpos, xquat, x
         xpos_out[1] = tmp3[1] + xpos[body, 1]
         xpos_out[2] = tmp3[2] + xpos[body, 2]
     elif sameframe == 1:
-        xpos_out[:] = xpos[body]
+        for k in range(3):
+            xpos_out[k] = xpos[body, k]
     else:
-        xpos_out[:] = xipos[body]
+        for k in range(3):
+            xpos_out[k] = xipos[body, k]
     if sameframe == 0:
         _mulquat(tmp4, xquat[body], quat)
         _quat2mat(xmat_out, tmp4)
     elif sameframe == 1 or sameframe == 3:
-        xmat_out[:] = xmat[body]
+        for k in range(9):
+            xmat_out[k] = xmat[body, k]
     else:
-        xmat_out[:] = ximat[body]
+        for k in range(9):
+            xmat_out[k] = ximat[body, k]
 
 
 @njit
@@ -248,19 +252,23 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     """
     nb = body_parent.shape[0]
     nj = jnt_type.shape[0]
-    qpos[:] = qpos_in
+    for k in range(qpos.shape[0]):
+        qpos[k] = qpos_in[k]
     for j in range(nj):
         t = jnt_type[j]
         if t == FREE:
             _normalize4(qpos[jnt_qposadr[j] + 3 : jnt_qposadr[j] + 7])
         elif t == BALL:
             _normalize4(qpos[jnt_qposadr[j] : jnt_qposadr[j] + 4])
-    xpos[0, :] = 0.0
-    xquat[0, :] = 0.0
+    for k in range(3):
+        xpos[0, k] = 0.0
+        xipos[0, k] = 0.0
+    for k in range(4):
+        xquat[0, k] = 0.0
     xquat[0, 0] = 1.0
-    xipos[0, :] = 0.0
-    xmat[0, :] = 0.0
-    ximat[0, :] = 0.0
+    for k in range(9):
+        xmat[0, k] = 0.0
+        ximat[0, k] = 0.0
     for k in (0, 4, 8):
         xmat[0, k] = 1.0
         ximat[0, k] = 1.0
@@ -322,8 +330,10 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
                     for k in range(3):
                         pos[k] += vec[k] - vec1[k]
         _normalize4(quat)
-        xquat[i, :] = quat
-        xpos[i, :] = pos
+        for k in range(4):
+            xquat[i, k] = quat[k]
+        for k in range(3):
+            xpos[i, k] = pos[k]
         _quat2mat(xmat[i], quat)
     for i in range(1, nb):
         _local2global(xipos[i], ximat[i], body_ipos[i], body_iquat[i], i, body_sameframe[i],
@@ -341,7 +351,8 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
                 subtree_com[p, k] += subtree_com[i, k]
             mass_subtree[p] += mass_subtree[i]
         if mass_subtree[i] < _MINVAL:
-            subtree_com[i, :] = xipos[i]
+            for k in range(3):
+                subtree_com[i, k] = xipos[i, k]
         else:
             inv = 1.0 / max(_MINVAL, mass_subtree[i])
             for k in range(3):
@@ -383,5 +394,8 @@ def fk_batch(Q, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
         fk_tree(Q[t], body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
                 body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
                 jnt_pos, qpos0, qpos, xpos, xquat, xmat, xipos, ximat, stc, ms, work)
-        out_com[t, :] = stc[1]
-        out_xipos[t, :, :] = xipos
+        for k in range(3):
+            out_com[t, k] = stc[1, k]
+        for i in range(nb):
+            for k in range(3):
+                out_xipos[t, i, k] = xipos[i, k]

@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 from scipy.signal import butter, lfilter_zi
 
-from grfguard.errors import ConfigError
+from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
 from grfguard.kernels._jit import fma, njit
@@ -274,7 +274,8 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     elif abs(nt - 1.0) > 1e-15:
         inv = 1.0 / nt
         tw, tx, ty, tz = tw * inv, tx * inv, ty * inv, tz * inv
-    qin[:] = qpos0
+    for k in range(nq):
+        qin[k] = qpos0[k]
     r = iprm[_IP_ROOT]
     qin[r] = 0.0
     qin[r + 1] = 0.0
@@ -628,6 +629,91 @@ def vfs_run(X, Y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
     return n
 
 
+@njit
+def _unpack(cf, ci):
+    nb, nj, nq, ns, order = ci[0], ci[1], ci[2], ci[3], ci[4]
+    nbr = nb - 1
+    o = 0
+    prm = cf[o : o + N_PRM]
+    o += N_PRM
+    body_inertia = cf[o : o + 3 * nbr].reshape((nbr, 3))
+    o += 3 * nbr
+    corner_radius = cf[o : o + 8]
+    o += 8
+    filt_b = cf[o : o + 3 * (order + 1)].reshape((3, order + 1))
+    o += 3 * (order + 1)
+    filt_a = cf[o : o + 3 * (order + 1)].reshape((3, order + 1))
+    o += 3 * (order + 1)
+    filt_zi = cf[o : o + 3 * order].reshape((3, order))
+    o += 3 * order
+    body_pos = cf[o : o + 3 * nb].reshape((nb, 3))
+    o += 3 * nb
+    body_quat = cf[o : o + 4 * nb].reshape((nb, 4))
+    o += 4 * nb
+    body_ipos = cf[o : o + 3 * nb].reshape((nb, 3))
+    o += 3 * nb
+    body_iquat = cf[o : o + 4 * nb].reshape((nb, 4))
+    o += 4 * nb
+    body_mass = cf[o : o + nb]
+    o += nb
+    jnt_axis = cf[o : o + 3 * nj].reshape((nj, 3))
+    o += 3 * nj
+    jnt_pos = cf[o : o + 3 * nj].reshape((nj, 3))
+    o += 3 * nj
+    qpos0 = cf[o : o + nq]
+    o += nq
+    site_pos = cf[o : o + 3 * ns].reshape((ns, 3))
+    o += 3 * ns
+    site_quat = cf[o : o + 4 * ns].reshape((ns, 4))
+    i = 5
+    iprm = ci[i : i + N_IPRM]
+    i += N_IPRM
+    body_parent = ci[i : i + nb]
+    i += nb
+    body_jntadr = ci[i : i + nb]
+    i += nb
+    body_jntnum = ci[i : i + nb]
+    i += nb
+    body_sameframe = ci[i : i + nb]
+    i += nb
+    jnt_type = ci[i : i + nj]
+    i += nj
+    jnt_qposadr = ci[i : i + nj]
+    i += nj
+    site_body = ci[i : i + ns]
+    i += ns
+    site_sameframe = ci[i : i + ns]
+    tree = (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
+            body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0)
+    sites = (site_body, site_sameframe, site_pos, site_quat)
+    return prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites
+
+
+@njit
+def vfs_step_packed(x, y, state, cf, ci, ws, iws):
+    """:func:`vfs_step` with every constant packed into two arrays ``cf`` (float) and ``ci``
+    (int) (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`): seven arguments, so a call from
+    Python spends little time converting them."""
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
+    return vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                    filt_zi, tree, sites, ws, iws)
+
+
+@njit
+def vfs_run_packed(X, Y, state, cf, ci, ws, iws):
+    """:func:`vfs_step_packed` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
+    number of valid samples (the batch path: the same step as streaming)."""
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
+    n = 0
+    for t in range(X.shape[0]):
+        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                    filt_zi, tree, sites, ws, iws):
+            n += 1
+    return n
+
+
 class VFSKernel:
     """Constants, state and scratch of the compiled virtual force sensor.
 
@@ -694,6 +780,20 @@ class VFSKernel:
         self.order = cfg.filter_order
         nb = tm.nbody
         self.state = np.zeros(_state_size(nb - 1, self.order))
+        header = np.array([nb, tm.jnt_type.shape[0], tm.nq,
+                           tm.site_body.shape[0], self.order], np.int64)
+        self.cf = np.ascontiguousarray(np.concatenate([
+            prm, self.body_inertia.ravel(), self.corner_radius, self.filt_b.ravel(),
+            self.filt_a.ravel(), self.filt_zi.ravel(), tm.body_pos.ravel(),
+            tm.body_quat.ravel(), tm.body_ipos.ravel(), tm.body_iquat.ravel(), tm.body_mass,
+            tm.jnt_axis.ravel(), tm.jnt_pos.ravel(), tm.qpos0, tm.site_pos.ravel(),
+            tm.site_quat.ravel(),
+        ]), dtype=float)
+        self.ci = np.ascontiguousarray(np.concatenate([
+            header, ip, tm.body_parent, tm.body_jntadr, tm.body_jntnum, tm.body_sameframe,
+            tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe,
+        ]), dtype=np.int64)
+        self._entry = None
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
         self.iws = np.zeros(64, np.int64)
         self.reset()
@@ -728,19 +828,50 @@ class VFSKernel:
                 self.filt_b, self.filt_a, self.filt_zi, self.tree_arrays, self.site_arrays,
                 self.ws, self.iws)
 
+    def packed_args(self) -> tuple:
+        """``(state, cf, ci, ws, iws)``: the arguments after ``x, y`` of
+        :func:`vfs_step_packed` / ``X, Y`` of :func:`vfs_run_packed`."""
+        return (self.state, self.cf, self.ci, self.ws, self.iws)
+
     def step(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """One sample: input row (24,) -> output row (22,) (``y`` is filled if given)."""
         if y is None:
             y = np.empty(N_OUT)
-        vfs_step(x, y, *self._args())
+        x = np.ascontiguousarray(x, dtype=float)
+        if x.shape != (N_IN,) or y.shape != (N_OUT,):
+            # the compiled code does not check bounds: refuse wrong shapes here
+            raise LogFormatError(
+                f"the compiled virtual force sensor takes an input row of shape ({N_IN},) in "
+                f"IN_COLUMNS order and an output row of shape ({N_OUT},); got {x.shape} and "
+                f"{y.shape} (see grfguard.kernels.vfs.IN_COLUMNS / OUT_COLUMNS)"
+            )
+        args = (x, y, self.state, self.cf, self.ci, self.ws, self.iws)
+        ep = self._entry
+        if ep is not None and y.flags.c_contiguous and y.dtype == np.float64:
+            ep(*args)
+            return y
+        vfs_step_packed(*args)
+        if ep is None and y.flags.c_contiguous and y.dtype == np.float64:
+            # the compiled entry point for exactly these argument types skips the
+            # dispatcher's type resolution (about 1 us per call)
+            import numba
+
+            sig = tuple(numba.typeof(a) for a in args)
+            cres = vfs_step_packed.overloads.get(sig)
+            self._entry = cres.entry_point if cres is not None else None
         return y
 
     def run(self, X: np.ndarray) -> np.ndarray:
         """Reset, then every row of ``X`` (T, 24) -> (T, 22)."""
         self.reset()
         X = np.ascontiguousarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != N_IN:
+            raise LogFormatError(
+                f"the compiled virtual force sensor takes a (T, {N_IN}) array in IN_COLUMNS "
+                f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
+            )
         Y = np.empty((X.shape[0], N_OUT))
-        vfs_run(X, Y, *self._args())
+        vfs_run_packed(X, Y, *self.packed_args())
         return Y
 
 
@@ -826,9 +957,7 @@ class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
         sample (non-finite input: last output held, ``vfs_valid = 0``)."""
         if y is None:
             y = np.empty(N_OUT)
-        k = self.kernel()
-        vfs_step(x, y, *k._args())
-        return y
+        return self.kernel().step(x, y)
 
     def update(self, row: Mapping[str, float]) -> dict[str, float]:
         if not self.compiled:

@@ -251,8 +251,14 @@ class _Reader:
 
 
 def _resolve_model(spec: str, base: Path, source: str) -> Path:
-    """``example-robot-data:<path>`` or a path relative to the TOML's folder."""
+    """``example-robot-data:<path>``, ``grfguard:suralp`` or a path relative to the TOML's
+    folder."""
     prefix = "example-robot-data:"
+    if spec.startswith("grfguard:"):
+        if spec != "grfguard:suralp":
+            raise ConfigError(f"{source}: key 'model' = {spec!r}: the only built-in model is "
+                              "'grfguard:suralp'")
+        return Path(spec)  # generated MJCF (grfguard.model.mjcf), no file
     if spec.startswith(prefix):
         import importlib.metadata as md
 

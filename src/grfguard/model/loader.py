@@ -115,16 +115,35 @@ def _urdf_xml(desc: RobotDescription) -> str:
 
 def _spec(desc: RobotDescription) -> mujoco.MjSpec:
     try:
-        if desc.model.suffix.lower() == ".urdf":
+        if str(desc.model) == "grfguard:suralp":
+            from grfguard.model.mjcf import build_mjcf
+            from grfguard.model.robot import SURALP
+
+            spec = _clean_mjcf(mujoco.MjSpec.from_string(build_mjcf(SURALP)))
+        elif desc.model.suffix.lower() == ".urdf":
             spec = mujoco.MjSpec.from_string(_urdf_xml(desc))
         else:
-            spec = mujoco.MjSpec.from_file(str(desc.model))
+            spec = _clean_mjcf(mujoco.MjSpec.from_file(str(desc.model)))
             spec.compiler.balanceinertia = True
     except ValueError as exc:
         raise ConfigError(f"{desc.model}: MuJoCo cannot read it ({exc})") from exc
     for g in list(spec.geoms):
         g.contype = 0
         g.conaffinity = 0
+    return spec
+
+
+def _clean_mjcf(spec: mujoco.MjSpec) -> mujoco.MjSpec:
+    """An MJCF's own actuators, sensors, sites, world geoms (floor) and geoms named like
+    ours (``*_contact``, ``*_sole_box``) are replaced by ours."""
+    for group in (spec.actuators, spec.sensors, spec.sites):
+        for e in list(group):
+            spec.delete(e)
+    for g in list(spec.worldbody.geoms):
+        spec.delete(g)
+    for g in list(spec.geoms):  # names of our contact geoms
+        if g.name.endswith(("_contact", "_sole_box")):
+            spec.delete(g)
     return spec
 
 

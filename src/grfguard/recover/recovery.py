@@ -35,6 +35,8 @@ __all__ = ["RecoverTuning", "Recovery"]
 
 _N = len(SENSOR_NAMES)
 _NAN = float("nan")
+_REC_COLS = tuple(recovered_col(s) for s in SENSOR_NAMES)
+_ETA_COLS = tuple(eta_col(s) for s in SENSOR_NAMES)
 
 
 @dataclass(frozen=True)
@@ -85,6 +87,9 @@ class Recovery:
     def __init__(self, config: MonitorConfig, tuning: RecoverTuning | None = None) -> None:
         self.config = config
         self.tuning = tuning if tuning is not None else RecoverTuning()
+        dt = config.dt_s
+        self._a_fast = min(1.0, dt / self.tuning.fast_drop_tau_s)
+        self._a_lp = min(1.0, dt / self.tuning.noise_lowpass_tau_s)
         self.reset()
 
     def reset(self) -> None:
@@ -96,8 +101,8 @@ class Recovery:
     ) -> tuple[list[float], list[bool]]:
         """Per sensor: the corrected reading [N] and whether the reading carries
         information."""
-        dt = self.config.dt_s
-        a_lp = min(1.0, dt / self.tuning.noise_lowpass_tau_s)
+        a_lp = self._a_lp
+        gain_min = self.tuning.gain_min
         corrected = [_NAN] * _N
         info = [True] * _N
         for i in range(_N):
@@ -107,7 +112,7 @@ class Recovery:
                 r.lowpass_n = xi if math.isnan(lp) else lp + (xi - lp) * a_lp
             if s.flag and s.kind in ADDITIVE and math.isfinite(s.eta_n):
                 corrected[i] = xi - s.eta_n
-            elif s.flag and s.kind == "gain" and s.gain > self.tuning.gain_min:
+            elif s.flag and s.kind == "gain" and s.gain > gain_min:
                 corrected[i] = xi / s.gain
             elif s.flag and s.kind == "noise" and math.isfinite(r.lowpass_n):
                 corrected[i] = r.lowpass_n
@@ -141,7 +146,7 @@ class Recovery:
 
     def step(
         self, sens: Sequence[SensorState], x: Sequence[float], v: Sequence[float],
-        tot: Sequence[float],
+        tot: Sequence[float], out: dict[str, Any] | None = None,
     ) -> dict[str, Any]:
         """One sample: ``recovered_<s>`` and ``eta_<s>`` of every sensor.
 
@@ -150,21 +155,24 @@ class Recovery:
             x: Measured forces [N].
             v: VFS corner forces [N].
             tot: VFS vertical force per foot (right, left) [N].
+            out: Dict to write into (a new one by default); returned.
         """
-        a_fast = min(1.0, self.config.dt_s / self.tuning.fast_drop_tau_s)
+        a_fast = self._a_fast
         corrected, info = self._corrected(sens, x)
         total = tot[0] + tot[1]
         lacking = [j for j in range(_N) if not info[j]]
         known = math.fsum(corrected[j] for j in range(_N) if info[j] and
                           math.isfinite(corrected[j]))
-        out: dict[str, Any] = {}
-        for i, name in enumerate(SENSOR_NAMES):
+        if out is None:
+            out = {}
+        for i in range(_N):
             s, r, xi = sens[i], self._rec[i], x[i]
+            rec_col, eta_c = _REC_COLS[i], _ETA_COLS[i]
             if not s.flag and r.hand.w == 0.0 and math.isfinite(xi):
                 # healthy and fully handed back: the measurement itself
                 r.last_rec_n = xi
-                out[recovered_col(name)] = xi
-                out[eta_col(name)] = 0.0
+                out[rec_col] = xi
+                out[eta_c] = 0.0
                 continue
             if not info[i] and math.isfinite(total):
                 repl = self._balance(i, v, total, known, lacking)
@@ -179,9 +187,6 @@ class Recovery:
             if not math.isfinite(rec):
                 rec = r.last_rec_n
             r.last_rec_n = rec
-            out[recovered_col(name)] = rec
-            if s.flag:
-                out[eta_col(name)] = s.eta_n if s.kind in ADDITIVE else xi - rec
-            else:
-                out[eta_col(name)] = 0.0
+            out[rec_col] = rec
+            out[eta_c] = (s.eta_n if s.kind in ADDITIVE else xi - rec) if s.flag else 0.0
         return out

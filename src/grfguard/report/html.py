@@ -739,7 +739,6 @@ def write_html_report(
     """
     text = build_html_report(df, metrics=metrics, title=title, max_points=max_points,
                              focus_s=focus_s)
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text, encoding="utf-8")
-    return out
+    from grfguard.io.safe import atomic_write_text
+
+    return atomic_write_text(Path(path), text, what="HTML report")  # no partial report

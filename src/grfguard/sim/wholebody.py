@@ -424,8 +424,10 @@ def simulate_robot(
     t2 = _time.perf_counter()
     df = pd.DataFrame(_columns(robot, plan, phys, index, noise, int(seed)))
     df.attrs.update({
-        "robot": robot.description.to_dict(),
+        # "robot" holds a name here: a dict there is read as SURALP-shaped parameters
+        "robot": robot.description.name,
         "robot_name": robot.description.name,
+        "robot_description": robot.description.to_dict(),
         "sensing": robot.description.sensing,
         "mass": robot.mass,
         "joint_names": list(robot.joint_names),

@@ -1,0 +1,94 @@
+"""Model self-calibration (issue 10) on simulated walks of a robot that differs from its
+model: corrections against the recorded truth, and no false alarm once applied."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from grfguard.calib import ModelCorrections, apply_corrections, estimate_corrections
+from grfguard.detect import Monitor
+from grfguard.errors import LogFormatError
+from grfguard.model.robot import SENSOR_NAMES, SURALP
+from grfguard.sim import GaitConfig, simulate
+from grfguard.sim.reality import RealityGap
+
+GAP = RealityGap(
+    mass_error=0.05,
+    trunk_com_offset_m=(0.03, -0.03, 0.0),
+    imu_mount_rpy_deg=(2.0, -2.0, 0.0),
+    gyro_bias_rad_s=(0.03, 0.0, 0.0),
+    acc_bias_m_s2=(0.3, 0.0, 0.0),
+    load_cell_gain_error=0.05,
+    load_cell_zero_n=10.0,
+    seed=7,
+)
+
+
+@pytest.fixture(scope="module")
+def gap_walk() -> pd.DataFrame:
+    return simulate(gait=GaitConfig(duration=20.0), seed=1, reality=GAP)
+
+
+@pytest.fixture(scope="module")
+def corrections(gap_walk) -> ModelCorrections:
+    return estimate_corrections(gap_walk)
+
+
+def test_corrections_match_the_truth(gap_walk, corrections):
+    truth = gap_walk.attrs["reality"]
+    c = corrections
+    assert np.allclose(c.imu_mount_rpy_deg[:2], truth["imu_mount_rpy_deg"][:2], atol=0.3)
+    assert c.trunk_com_x_m == pytest.approx(0.03, abs=0.01)
+    assert c.trunk_com_y_m == pytest.approx(-0.03, abs=0.01)
+    assert np.allclose(c.gyro_bias_rad_s, truth["gyro_bias_rad_s"], atol=0.003)
+    gt = np.array([truth["load_cell_gain"][s] for s in SENSOR_NAMES])
+    ge = np.array([c.load_cell_gain[s] for s in SENSOR_NAMES])
+    rel = ge / gt
+    assert np.max(np.abs(rel / rel.mean() - 1)) < 0.01
+    m_seen = SURALP.mass * 1.05 * gt.mean()
+    assert c.mass_kg == pytest.approx(m_seen, rel=0.01)
+    zt = np.array([truth["load_cell_zero_n"][s] for s in SENSOR_NAMES])
+    ze = np.array([c.load_cell_zero_n[s] for s in SENSOR_NAMES])
+    assert np.max(np.abs(ze - zt)) < 3.0
+    assert all(v > 0 for v in c.sigma.values())
+
+
+def test_measured_mass_fixes_the_common_scale(gap_walk):
+    truth = gap_walk.attrs["reality"]
+    m_true = SURALP.mass * 1.05
+    c = estimate_corrections(gap_walk, measured_mass_kg=m_true)
+    gt = np.array([truth["load_cell_gain"][s] for s in SENSOR_NAMES])
+    ge = np.array([c.load_cell_gain[s] for s in SENSOR_NAMES])
+    assert ge.mean() == pytest.approx(gt.mean(), rel=0.01)
+    assert c.mass_kg == m_true and c.measured_mass
+
+
+def test_corrections_remove_the_false_alarms(gap_walk, corrections):
+    cols = [f"flag_{s}" for s in SENSOR_NAMES]
+    before = Monitor.for_log(gap_walk).run(gap_walk)
+    assert before[cols].any().sum() >= 2  # the gap alone breaks the nominal model
+    fixed = apply_corrections(gap_walk, corrections)
+    assert fixed.attrs["robot"]["mass"] == pytest.approx(corrections.mass_kg)
+    after = Monitor.for_log(fixed).run(fixed)
+    assert not after[cols].any().any()
+
+
+def test_toml_round_trip(tmp_path, corrections):
+    p = tmp_path / "th.toml"
+    p.write_text("[thresholds]\n" + corrections.to_toml())
+    back = ModelCorrections.from_toml(p)
+    assert back == corrections
+    assert back.sigma == pytest.approx(corrections.sigma)
+    q = tmp_path / "none.toml"
+    q.write_text("[thresholds]\n")
+    assert ModelCorrections.from_toml(q) is None
+    assert apply_corrections(pd.DataFrame(), None).empty
+
+
+def test_too_short_or_incomplete_log_is_refused(gap_walk):
+    with pytest.raises(LogFormatError, match="at least 1000 samples"):
+        estimate_corrections(gap_walk.iloc[:500])
+    with pytest.raises(LogFormatError, match="imu_gyro_x"):
+        estimate_corrections(gap_walk.drop(columns=["imu_gyro_x"]))

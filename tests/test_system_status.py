@@ -1,0 +1,86 @@
+"""System-level status (issue 10): a residual common to all sensors is blamed on the
+model (``model_mismatch``), a single sensor's is not; the wiring keeps stream = batch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from grfguard.detect.system import CommonModeConfig, CommonModeMonitor, SystemAwareMonitor
+from grfguard.errors import ConfigError
+from grfguard.estimate.vfs import VirtualForceSensor
+from grfguard.model.robot import SENSOR_NAMES, SURALP
+from grfguard.sim import GaitConfig, simulate
+from grfguard.sim.reality import RealityGap
+
+GAIT = GaitConfig(duration=8.0)
+
+
+def _vfs(df: pd.DataFrame) -> pd.DataFrame:
+    return VirtualForceSensor.for_log(df).run(df)
+
+
+def _status(df: pd.DataFrame, v: pd.DataFrame, offset: dict[str, float] | None = None):
+    cm = CommonModeMonitor(SURALP, 0.001)
+    x = df[[f"force_{s}" for s in SENSOR_NAMES]].to_numpy(float).copy()
+    for s, val in (offset or {}).items():
+        x[:, SENSOR_NAMES.index(s)] += val
+    vv = v[[f"vfs_{s}" for s in SENSOR_NAMES]].to_numpy(float)
+    c = df[["contact_ref_r", "contact_ref_l"]].to_numpy() > 0.5
+    raised, last = 0, None
+    for k in range(len(df)):
+        last = cm.update(x[k], vv[k], c[k])
+        raised += last.model_mismatch
+    return raised / len(df), last
+
+
+@pytest.fixture(scope="module")
+def exact():
+    df = simulate(gait=GAIT, seed=4)
+    return df, _vfs(df)
+
+
+def test_mass_error_raises_model_mismatch_with_the_ratio():
+    df = simulate(gait=GAIT, seed=4, reality=RealityGap(mass_error=0.05))
+    share, last = _status(df, _vfs(df))
+    assert share > 0.5
+    assert last.model_mismatch and "total force off by +" in last.reason
+    assert last.ratio == pytest.approx(0.05, abs=0.02)
+    # the correction explains the common residual: corrected VFS total ~ measured total
+    assert np.sum(last.correction_n) > 0
+
+
+def test_exact_model_does_not_blame_the_model(exact):
+    df, v = exact
+    share, last = _status(df, v)
+    assert share == 0.0 and last.reason == "" and not np.any(last.correction_n)
+
+
+def test_bad_samples_and_config():
+    cm = CommonModeMonitor()
+    r = cm.update([np.nan] * 8, [np.nan] * 8, (True, True))
+    assert not r.model_mismatch and np.all(np.isfinite(r.correction_n))
+    with pytest.raises(ConfigError, match="time_constant_s"):
+        CommonModeConfig(time_constant_s=0.0)
+
+
+def test_wired_monitor_stream_equals_batch_and_has_the_status_column(exact):
+    df = exact[0].iloc[:1500].copy()
+    df.attrs = dict(exact[0].attrs)
+    mon = SystemAwareMonitor.for_log(df)
+    batch = mon.run(df)
+    assert {"model_mismatch", "model_mismatch_reason", "standing_flag_r1"} <= set(batch)
+    mon.reset()
+    rows = [mon.update(r) for r in df.to_dict("records")]
+    stream = pd.DataFrame(rows, index=df.index)
+    for c in ("model_mismatch", *(f"flag_{s}" for s in SENSOR_NAMES)):
+        assert (stream[c].to_numpy() == batch[c].to_numpy()).all(), c
+    assert np.allclose(stream["vfs_r1"], batch["vfs_r1"], equal_nan=True, atol=1e-6)
+    assert not batch[[f"flag_{s}" for s in SENSOR_NAMES]].any().any()
+
+
+def test_single_sensor_offset_is_not_blamed_on_the_model(exact):
+    df, v = exact
+    share, last = _status(df, v, {"r2": 100.0})
+    assert share < 0.05, last.reason
