@@ -201,10 +201,13 @@ class Packed:
         o = self.offs[idx]
         if idx.size > 1 and (np.diff(o) == length).all():  # contiguous: one slice
             return self.buf[o[0] : o[0] + idx.size * length].reshape(idx.size, length)
-        raw = self.buf.tobytes() if self._bytes is None else self._bytes
-        self._bytes = raw  # bytes slices are far cheaper than memoryview slices
-        joined = b"".join([raw[a : a + length] for a in o.tolist()])
-        return np.frombuffer(joined, dtype=np.uint8).reshape(idx.size, length)
+        if length == 0 or idx.size == 0:
+            return np.zeros((idx.size, length), dtype=np.uint8)
+        # scattered (topics interleaved in the file): one gather, each message one
+        # ``length``-byte item of a window view that starts at every byte of the buffer
+        win = np.ndarray((self.buf.size - length + 1,), dtype=np.dtype((np.void, length)),
+                         buffer=self.buf, strides=(1,))
+        return win[o].view(np.uint8).reshape(idx.size, length)
 
 
 @dataclass

@@ -334,11 +334,11 @@ def _raw_mcap(files: list[Path], topics: list[str]
 
 def _raw_sqlite(files: list[Path], topics: list[str]
                 ) -> dict[str, tuple[_cdr.Packed, np.ndarray]] | None:
-    """Messages of ``topics`` from rosbag2 sqlite3 files: per file one query returns the
-    topic ids, times and lengths (as text, parsed by numpy) and the data concatenated
-    into one buffer; no Python work per message."""
+    """Messages of ``topics`` from rosbag2 sqlite3 files: per file one table scan (in
+    row id order, no index) returns the times and ``length * 2**16 + topic id`` per
+    message (as text, parsed by numpy) and the data concatenated into one buffer by
+    sqlite itself; no Python work per message. None if a file is not plain rosbag2."""
     import sqlite3
-    from operator import itemgetter
 
     blobs: list[bytes] = []
     parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {t: [] for t in topics}
@@ -349,36 +349,35 @@ def _raw_sqlite(files: list[Path], topics: list[str]
             ids = {i: n for n, i in con.execute("SELECT name, id FROM topics") if n in parts}
             if not ids:
                 continue
-            where = f"topic_id IN ({','.join('?' * len(ids))})"
-            # one scan; the blobs concatenated by sqlite itself (checked against the
-            # lengths below; else message by message)
-            tid_s, ts_s, len_s, data = con.execute(
-                "SELECT group_concat(topic_id), group_concat(timestamp), "
-                "group_concat(length(data)), CAST(group_concat(data, '') AS BLOB) FROM "
-                f"(SELECT topic_id, timestamp, data FROM messages WHERE {where} ORDER BY id)",
-                list(ids)).fetchone()
-            if tid_s is None:
-                continue
-            tid, tstamp, lens = (np.fromstring(x, dtype=np.int64, sep=",")
-                                 for x in (tid_s, ts_s, len_s))
-            if not isinstance(data, bytes) or lens.sum() != len(data):
-                rows = con.execute(f"SELECT data FROM messages WHERE {where} ORDER BY id",
-                                   list(ids)).fetchall()
-                data = b"".join(map(itemgetter(0), rows))
+            if not all(isinstance(i, int) and 0 <= i < 1 << 16 for i in ids):
+                return None
+            # NOT INDEXED: a plain scan of the rowid table, so in row id order; the
+            # blobs concatenated by sqlite (checked against the lengths below)
+            ts_s, key_s, data = con.execute(
+                "SELECT group_concat(timestamp), group_concat(length(data) * 65536 + "
+                "topic_id), CAST(group_concat(data, '') AS BLOB) FROM messages NOT INDEXED "
+                f"WHERE topic_id IN ({','.join('?' * len(ids))})", list(ids)).fetchone()
         except sqlite3.DatabaseError:
             return None
         finally:
             con.close()
-        if not (tid.size == tstamp.size == lens.size) or lens.sum() != len(data):
+        if ts_s is None:
+            continue
+        tstamp, key = (np.fromstring(x, dtype=np.int64, sep=",") for x in (ts_s, key_s))
+        tid, lens = key & 0xFFFF, key >> 16
+        if not isinstance(data, bytes) or tstamp.size != key.size or lens.sum() != len(data):
             return None
         offs = np.zeros(lens.size, dtype=np.int64)
         np.cumsum(lens[:-1], out=offs[1:])
+        by = np.argsort(tid.astype(np.uint16), kind="stable")  # per topic, in row order
+        st = tid[by]
         for i, name in ids.items():
-            sel = tid == i
+            lo, hi = np.searchsorted(st, [i, i + 1]).tolist()
+            sel = by[lo:hi]
             parts[name].append((offs[sel] + base, lens[sel], tstamp[sel]))
         blobs.append(data)
         base += len(data)
-    joined = b"".join(blobs)
+    joined = blobs[0] if len(blobs) == 1 else b"".join(blobs)
     buf = np.frombuffer(joined, dtype=np.uint8)
     out = {}
     for t, ps in parts.items():
