@@ -299,6 +299,8 @@ def resolve_robot(value: str | Path | None, option: str = "--robot") -> Any:
     looks_like_path = p.suffix.lower() == ".toml" or p.exists() or "/" in text or "\\" in text
     if looks_like_path:
         read_toml(p, "robot TOML", option)  # a directory, binary or broken file: one line
+    if text.lower() == "suralp":  # the built-in biped (its description file is for the sim)
+        return robot_mod.SURALP
     if is_described_robot(text):  # Talos, G1 or a TOML with a model file
         from grfguard.model.description import load_description
 
