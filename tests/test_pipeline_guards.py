@@ -140,7 +140,7 @@ def test_fault_after_a_time_gap_is_found_as_fast(long_walk: pd.DataFrame, gap_s:
     assert out["time"].iloc[k] == pytest.approx(gap_start + gap_s)
     assert (states == "time_gap").sum() == 1
     tg = out["time"].to_numpy()
-    before_fault = tg < onset
+    before_fault = tg < onset - 0.005
     assert not out.loc[before_fault, FLAGS].to_numpy().any()
     ref = Monitor.for_log(faulty).run(faulty)
     d_gap, d_ref = _delay(out, "r2", onset), _delay(ref, "r2", onset)
@@ -159,7 +159,7 @@ def test_time_backwards_and_constant_stamps(walk: pd.DataFrame) -> None:
     log["time"] = t
     out = Monitor.for_log(log).run(log)
     states = out["system_state"].to_numpy()
-    assert (states == "time_constant").sum() == 299
+    assert (states == "time_constant").sum() == 299  # 3.001-3.299 s
     assert (states == "time_backwards").sum() == 1
     assert (states == "time_gap").sum() == 1  # 3.0 -> 3.3 after the constant stretch
     assert len(_flag_times(out)) == 0

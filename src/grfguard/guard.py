@@ -76,7 +76,7 @@ class GuardConfig:
 
     gap_s: float = 0.02
     gap_periods: float = 5.0
-    settle_s: float = 0.15
+    settle_s: float = 0.3
     reject_implausible: bool = True
 
     def __post_init__(self) -> None:
@@ -223,7 +223,9 @@ class Continuity:
 
     Per sample: :meth:`before` (does the VFS need a reset before this sample?) and,
     once the VFS output is known, :meth:`after` (may the tests use it?). A break is a
-    time state other than ``ok`` or a sample after one the VFS could not use.
+    time gap (rows missing) or a sample after one the VFS could not use. Constant,
+    backwards or missing stamps are not a break of the data (the VFS runs on its nominal
+    period and never reads the stamps): only the detector's clock is kept monotone.
 
     Args:
         settle_s: Settling time after a reset [s].
@@ -241,7 +243,7 @@ class Continuity:
 
     def before(self, time_state: str) -> bool:
         """True when the VFS must be reset before this sample."""
-        brk = self._started and (time_state != "ok" or self._prev_invalid)
+        brk = self._started and (time_state == "time_gap" or self._prev_invalid)
         self._started = True
         return brk
 

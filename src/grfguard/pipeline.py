@@ -205,6 +205,14 @@ class Monitor:
             out.update(det.diagnostics)
         return out
 
+    def _detect(self, p: _Prepared) -> dict[str, Any]:
+        """Detector and recovery on a prepared sample; a time gap first resets the
+        contact timeline (lift-off and touch-down times, swing durations measured across
+        the gap would be wrong)."""
+        if p.state == "time_gap":
+            self.detector.timeline.reset()
+        return self._step(p.clock, p.x, p.v, p.tot, p.cref, p.cest)
+
     def _finish(self, res: dict[str, Any], p: _Prepared) -> dict[str, Any]:
         """Kinds of out-of-range readings, recovered force within range, system state."""
         for i in range(len(SENSOR_NAMES)):
@@ -255,7 +263,7 @@ class Monitor:
             [_f(row, f"contact_ref_{s}") for s in SIDES],
             [_f(src, f"contact_est_{s}") for s in SIDES],
         )
-        res = self._finish(self._step(p.clock, p.x, p.v, p.tot, p.cref, p.cest), p)
+        res = self._finish(self._detect(p), p)
         out: dict[str, Any] = dict(vout)
         out.update(res)
         return out
@@ -332,7 +340,7 @@ class Monitor:
             self.vfs._check_columns(log.columns)
             valid_in = self.vfs._inputs(clean).valid() if n else np.zeros(0, bool)
             for k in range(1, n):
-                resets[k] = times[k][1] != "ok" or not valid_in[k - 1]
+                resets[k] = times[k][1] == "time_gap" or not valid_in[k - 1]
             vdf = self._vfs_batch(clean, resets)
         inp = DetectorInputs.from_frames(clean, vdf if vdf is not None else clean)
         x_raw = [pd.to_numeric(log[force_col(s)], errors="coerce").to_numpy(float).tolist()
@@ -358,7 +366,7 @@ class Monitor:
             cols = list(pres)
             rows = [{c: pres[c][k] for c in cols} for k in range(n)]
         else:
-            rows = [self._step(p.clock, p.x, p.v, p.tot, p.cref, p.cest) for p in prepared]
+            rows = [self._detect(p) for p in prepared]
         rows = [self._finish(r, p) for r, p in zip(rows, prepared, strict=True)]
         res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)
         out = log.copy()
