@@ -29,6 +29,7 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector, DetectorInputs
 from grfguard.detect.paper import PaperDetector
+from grfguard.detect.system import CommonModeConfig, CommonModeMonitor
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
 from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
@@ -105,6 +106,7 @@ class Monitor:
         recover_tuning: RecoverTuning | None = None,
         guard: GuardConfig | None = None,
         robot: RobotConfig | None = None,
+        common_mode: CommonModeConfig | bool = False,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
@@ -118,11 +120,16 @@ class Monitor:
         self.inputs = InputGuard(robot, self.guard)
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
+        self.common: CommonModeMonitor | None = None
+        if common_mode is not False:
+            cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
+            self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
         self.reset()
 
     @classmethod
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
-                guard: GuardConfig | None = None) -> Monitor:
+                guard: GuardConfig | None = None,
+                common_mode: CommonModeConfig | bool = False) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
         the robot (physical ranges) from ``log.attrs``."""
@@ -137,7 +144,7 @@ class Monitor:
             from grfguard.estimate.vfs import VirtualForceSensor
 
             vfs = VirtualForceSensor.for_log(log, cfg.vfs)
-        return cls(cfg, vfs, guard=guard, robot=robot_of(log))
+        return cls(cfg, vfs, guard=guard, robot=robot_of(log), common_mode=common_mode)
 
     @property
     def sensors(self) -> list[Any]:
@@ -153,6 +160,8 @@ class Monitor:
         self.recovery.reset()
         self.time_guard.reset()
         self.continuity.reset()
+        if self.common is not None:
+            self.common.reset()
         self._spike = [False] * len(SENSOR_NAMES)
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
@@ -211,7 +220,23 @@ class Monitor:
         the gap would be wrong)."""
         if p.state == "time_gap":
             self.detector.timeline.reset()
-        return self._step(p.clock, p.x, p.v, p.tot, p.cref, p.cest)
+        if self.common is None or self.config.method == "paper":
+            return self._step(p.clock, p.x, p.v, p.tot, p.cref, p.cest)
+        valid = [(ce > 0.5) if math.isfinite(ce) else (cr > 0.5)
+                 for ce, cr in zip(p.cest, p.cref, strict=True)]
+        if not all(math.isfinite(q) for q in p.v):
+            valid = [False, False]
+        frozen = any(s.flag for s in self.detector.sensors)
+        cm = self.common.update(p.x, p.v, valid, frozen=frozen)
+        v, tot = p.v, p.tot
+        if cm.model_mismatch:
+            corr = [float(c) for c in cm.correction_n]
+            v = [a + c for a, c in zip(v, corr, strict=True)]
+            tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
+        out = self._step(p.clock, p.x, v, tot, p.cref, p.cest)
+        out["model_mismatch"] = cm.model_mismatch
+        out["model_mismatch_reason"] = cm.reason
+        return out
 
     def _finish(self, res: dict[str, Any], p: _Prepared) -> dict[str, Any]:
         """Kinds of out-of-range readings, recovered force within range, system state."""
