@@ -120,6 +120,7 @@ class Monitor:
         self.inputs = InputGuard(robot, self.guard)
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
+        self._cm_freeze = True
         self.common: CommonModeMonitor | None = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
@@ -226,7 +227,7 @@ class Monitor:
                  for ce, cr in zip(p.cest, p.cref, strict=True)]
         if not all(math.isfinite(q) for q in p.v):
             valid = [False, False]
-        frozen = any(s.flag for s in self.detector.sensors)
+        frozen = self._cm_freeze and any(s.flag for s in self.detector.sensors)
         cm = self.common.update(p.x, p.v, valid, frozen=frozen)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
@@ -274,7 +275,10 @@ class Monitor:
         clock, tstate, jump = self.time_guard.step(t_raw)
         reset = self.continuity.before(tstate)
         if reset and self.vfs is not None:
-            self._vfs_resync()
+            if self._can_resync():
+                self._vfs_resync()
+            else:
+                self.vfs.reset()
         vout = self._vfs_row(clean)
         src = vout if self.vfs is not None else clean
         v = [_f(src, vfs_col(s)) for s in SENSOR_NAMES]
@@ -301,6 +305,10 @@ class Monitor:
         return all(math.isfinite(q) for q in v) and all(math.isfinite(q) for q in tot)
 
     # ------------------------------------------------------------------ batch
+    def _can_resync(self) -> bool:
+        """The VFS runs the Python stages (a compiled sensor is reset instead)."""
+        return not getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "_hist")
+
     def _vfs_resync(self) -> None:
         """Forget the VFS's finite-difference history (a continuity break): the next two
         samples have no rate; filters, attitude and odometry keep their state."""
@@ -342,6 +350,26 @@ class Monitor:
         vfs.reset()
         return pd.DataFrame(result, index=clean.index)
 
+    def _vfs_reset_segments(self, clean: pd.DataFrame, resets: np.ndarray) -> pd.DataFrame:
+        """The VFS over the log, reset (not resynced) at every break."""
+        from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
+
+        assert self.vfs is not None
+        n = len(clean)
+        valid = self.vfs._inputs(clean).valid()
+        starts = sorted({0, *np.flatnonzero(resets).tolist(), n})
+        parts = []
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            seg = clean.iloc[a:b]
+            if valid[a:b].any():
+                parts.append(self.vfs.run(seg))
+            else:  # a reset VFS holds nothing
+                blank = pd.DataFrame(np.nan, index=seg.index, columns=list(VFS_OUTPUT_COLUMNS))
+                blank["vfs_valid"] = 0.0
+                parts.append(blank)
+        self.vfs.reset()
+        return pd.concat(parts)
+
     def run(self, log: pd.DataFrame) -> pd.DataFrame:
         """Reset, then process the whole log; returns ``log`` plus the output columns
         (the same numbers as :meth:`update` row by row).
@@ -366,7 +394,13 @@ class Monitor:
             valid_in = self.vfs._inputs(clean).valid() if n else np.zeros(0, bool)
             for k in range(1, n):
                 resets[k] = times[k][1] == "time_gap" or not valid_in[k - 1]
-            vdf = self._vfs_batch(clean, resets)
+            if not resets.any():
+                vdf = self.vfs.run(clean)
+                self.vfs.reset()
+            elif self._can_resync():
+                vdf = self._vfs_batch(clean, resets)
+            else:
+                vdf = self._vfs_reset_segments(clean, resets)
         inp = DetectorInputs.from_frames(clean, vdf if vdf is not None else clean)
         x_raw = [pd.to_numeric(log[force_col(s)], errors="coerce").to_numpy(float).tolist()
                  for s in SENSOR_NAMES]
