@@ -163,3 +163,27 @@ def test_time_backwards_and_constant_stamps(walk: pd.DataFrame) -> None:
     assert (states == "time_backwards").sum() == 1
     assert (states == "time_gap").sum() == 1  # 3.0 -> 3.3 after the constant stretch
     assert len(_flag_times(out)) == 0
+
+
+def test_common_mode_option_is_neutral_on_the_exact_model(walk: pd.DataFrame) -> None:
+    """Issue 10 wiring (``common_mode=True``): the paper's scenario on the exact model
+    gives the same flags and kinds; no model mismatch is raised."""
+    log = inject_faults(walk, ["r1=frozen:0@5", "r2=offset:100@5", "r3=drift:15@5",
+                               "r4=offset:-100@5"], seed=0)
+    ref = Monitor.for_log(log).run(log)
+    out = Monitor.for_log(log, common_mode=True).run(log)
+    cols = FLAGS + [f"kind_{s}" for s in SENSOR_NAMES]
+    pd.testing.assert_frame_equal(out[cols], ref[cols])
+    assert not out["model_mismatch"].any()
+    assert ref[["flag_r1", "flag_r2", "flag_r4"]].any().all()
+
+
+def test_common_mode_blames_a_mass_error_on_the_model() -> None:
+    from grfguard.sim import GaitConfig, NoiseConfig, simulate
+    from grfguard.sim.reality import load_reality
+
+    log = simulate(gait=GaitConfig(duration=8.0), noise=NoiseConfig(), seed=0,
+                   reality=load_reality("mass_plus5"))
+    out = Monitor.for_log(log, common_mode=True).run(log)
+    assert out["model_mismatch"].iloc[-1]
+    assert "total force off by +" in out["model_mismatch_reason"].iloc[-1]

@@ -120,7 +120,6 @@ class Monitor:
         self.inputs = InputGuard(robot, self.guard)
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
-        self._cm_freeze = True
         self.common: CommonModeMonitor | None = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
@@ -227,7 +226,7 @@ class Monitor:
                  for ce, cr in zip(p.cest, p.cref, strict=True)]
         if not all(math.isfinite(q) for q in p.v):
             valid = [False, False]
-        frozen = self._cm_freeze and any(s.flag for s in self.detector.sensors)
+        frozen = any(s.flag for s in self.detector.sensors)
         cm = self.common.update(p.x, p.v, valid, frozen=frozen)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
