@@ -53,6 +53,21 @@ def _f(row: Mapping[str, Any], key: str) -> float:
         return _NAN
 
 
+def _robot_by_mass(log: pd.DataFrame) -> RobotConfig:
+    """A stand-in robot with the log's mass (``attrs["robot"]["mass"]`` or
+    ``["nominal"]["mass"]``) for the physical ranges; SURALP's when none is found."""
+    r = (getattr(log, "attrs", {}) or {}).get("robot")
+    for d in (r, r.get("nominal") if isinstance(r, Mapping) else None):
+        if isinstance(d, Mapping):
+            try:
+                m = float(d["mass"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if math.isfinite(m) and m > 0:
+                return RobotConfig(mass=m)
+    return RobotConfig()
+
+
 class _Prepared(NamedTuple):
     """One sample after the guards: the detector's arguments and the system state."""
 
@@ -144,7 +159,11 @@ class Monitor:
             from grfguard.estimate.vfs import VirtualForceSensor
 
             vfs = VirtualForceSensor.for_log(log, cfg.vfs)
-        return cls(cfg, vfs, guard=guard, robot=robot_of(log), common_mode=common_mode)
+        try:
+            robot = robot_of(log)
+        except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
+            robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
+        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode)
 
     @property
     def sensors(self) -> list[Any]:
