@@ -20,8 +20,6 @@ MAX_LINES = 80
 #: ``"path/relative/to/grfguard.py::function"`` -> reason it may stay long. Keep short.
 EXCEPTIONS: dict[str, str] = {
     "estimate/wrench.py::estimate_wrenches": "owned by the estimate helper (issue 8)",
-    "calib/selfcal.py::estimate_corrections": "not split yet",
-    "campaign/runner.py::run_campaign": "not split yet",
     "io/bagwrite.py::write_bag": "not split yet",
     "io/mcap_export.py::export_mcap": "not split yet",
     "io/plausibility.py::check_log": "not split yet",
@@ -31,14 +29,8 @@ EXCEPTIONS: dict[str, str] = {
     "kernels/nnls.py::prior_qp": "not split yet",
     "kernels/vfs.py::vfs_step": "not split yet",
     "model/loader.py::load_model": "not split yet",
-    "model/mjcf.py::build_mjcf": "not split yet",
     "report/html.py::sensor_figure_specs": "not split yet",
     "report/html.py::overview_figure_specs": "not split yet",
-    "sim/pattern.py::plan_walk": "not split yet",
-    "sim/simulate.py::run_physics": "not split yet",
-    "sim/simulate.py::simulate": "not split yet",
-    "sim/simulate.py::_log_columns": "not split yet",
-    "sim/wholebody.py::plan_wholebody": "not split yet",
 }
 
 #: Layers the stages must never import.
