@@ -25,10 +25,7 @@ EXCEPTIONS: dict[str, str] = {
     "io/plausibility.py::check_log": "not split yet",
     "io/rosbag.py::read_raw": "not split yet",
     "io/rosbag.py::read_bag": "not split yet",
-    "kernels/fk.py::fk_tree": "not split yet",
-    "kernels/nnls.py::prior_qp": "not split yet",
     "kernels/vfs.py::vfs_step": "not split yet",
-    "model/loader.py::load_model": "not split yet",
     "report/html.py::sensor_figure_specs": "not split yet",
     "report/html.py::overview_figure_specs": "not split yet",
 }
