@@ -25,7 +25,6 @@ EXCEPTIONS: dict[str, str] = {
     "io/plausibility.py::check_log": "not split yet",
     "io/rosbag.py::read_raw": "not split yet",
     "io/rosbag.py::read_bag": "not split yet",
-    "kernels/vfs.py::vfs_step": "not split yet",
     "report/html.py::sensor_figure_specs": "not split yet",
     "report/html.py::overview_figure_specs": "not split yet",
 }
