@@ -285,6 +285,11 @@ def estimate_corrections(
 ) -> ModelCorrections:
     """Identify model and sensor corrections from fault-free logs of one robot.
 
+    The stages run in order: load-cell zeros (:func:`_fit_zeros`), gyro bias
+    (:func:`_fit_gyro_bias`), accelerometer bias (:func:`_fit_acc_bias`), IMU mounting
+    (:func:`_fit_imu_mount`), then twice gains and mass (:func:`_fit_gains`) and the
+    trunk CoM (:func:`_fit_trunk_com`).
+
     Args:
         logs: One or more fault-free logs (log contract; ``contact_ref_*`` needed) of the
             same robot; about one minute of walking with standing at start and end.
@@ -303,10 +308,39 @@ def estimate_corrections(
         raise LogFormatError("estimate_corrections needs at least one fault-free log")
     robot = robot_of(frames[0])
     data = [_load(df) for df in frames]
-    g = robot.gravity
     sigma: dict[str, float] = {}
+    zero = _fit_zeros(data, sigma)
+    b_g = _fit_gyro_bias(data, sigma)
+    b_a = _fit_acc_bias(data, robot.gravity, sigma)
+    R_BI = _fit_imu_mount(data, robot, zero, sigma)
+    rpy = _R_to_rpy(R_BI)
 
-    # 1. zeros from swing feet
+    # gains/mass and trunk CoM twice: the second pass computes the relative CoM motion
+    # with the corrected trunk CoM
+    rob_fit = robot
+    for _ in range(2):
+        mass, gains = _fit_gains(data, rob_fit, zero, b_a, R_BI, measured_mass_kg, sigma)
+        d_com = _fit_trunk_com(data, robot, mass, gains, zero, R_BI, sigma)
+        rob_fit = dataclasses.replace(
+            robot, trunk_com_x=robot.trunk_com_x + float(d_com[0]),
+            trunk_com_y=robot.trunk_com_y + float(d_com[1]),
+        )
+    return ModelCorrections(
+        mass_kg=mass,
+        trunk_com_x_m=float(robot.trunk_com_x + d_com[0]),
+        trunk_com_y_m=float(robot.trunk_com_y + d_com[1]),
+        imu_mount_rpy_deg=tuple(float(v) for v in np.degrees(rpy)),
+        gyro_bias_rad_s=tuple(float(v) for v in b_g),
+        acc_bias_m_s2=tuple(float(v) for v in b_a),
+        load_cell_gain={s: float(v) for s, v in zip(SENSOR_NAMES, gains, strict=True)},
+        load_cell_zero_n={s: float(v) for s, v in zip(SENSOR_NAMES, zero, strict=True)},
+        sigma=sigma,
+        measured_mass=measured_mass_kg is not None,
+    )
+
+
+def _fit_zeros(data: list, sigma: dict[str, float]) -> np.ndarray:
+    """Stage 1: load-cell zeros [N] (8,) as the median of each swing foot's readings."""
     zero = np.zeros(8)
     for si in range(2):
         vals = []
@@ -321,8 +355,11 @@ def estimate_corrections(
             sigma[f"zero_{SENSOR_NAMES[4 * si + k]}"] = float(
                 1.2533 * np.std(v[:, k]) / math.sqrt(max(1.0, len(v) * data[0].dt / 0.02))
             )
+    return zero
 
-    # 2. gyro bias from the orientation's rate over 0.5 s windows
+
+def _fit_gyro_bias(data: list, sigma: dict[str, float]) -> np.ndarray:
+    """Stage 2: gyro bias [rad/s] (3,) from the orientation's rate over 0.5 s windows."""
     diffs = []
     for d in data:
         n = int(round(0.5 / d.dt))
@@ -332,19 +369,24 @@ def estimate_corrections(
             ang = _so3_log(dR) / (n * d.dt)
             diffs.append(d.gyro[k0 : k0 + n].mean(axis=0) - ang)
     diffs = np.array(diffs)
-    b_g = np.median(diffs, axis=0)
     sigma["gyro_bias"] = float(np.std(diffs) / math.sqrt(len(diffs)))
+    return np.median(diffs, axis=0)
 
-    # 3. accelerometer bias: mean specific force = gravity (rest to rest)
+
+def _fit_acc_bias(data: list, g: float, sigma: dict[str, float]) -> np.ndarray:
+    """Stage 3: accelerometer bias [m/s^2] (3,): mean specific force = gravity."""
     ab = []
     for d in data:
         R = quat_to_rotation(d.quat)
         ab.append(d.acc - g * R[:, 2, :])  # R^T e_z = third row of R
     ab = np.concatenate(ab)
-    b_a = ab.mean(axis=0)
     sigma["acc_bias"] = float(np.std(ab) / math.sqrt(len(ab) * data[0].dt / 0.1))
+    return ab.mean(axis=0)
 
-    # 4. IMU mounting from flat soles in double support
+
+def _fit_imu_mount(data: list, robot: RobotConfig, zero: np.ndarray,
+                   sigma: dict[str, float]) -> np.ndarray:
+    """Stage 4: IMU mounting rotation ``R_BI`` (3, 3) from flat soles in double support."""
     zB, gI = [], []
     for d in data:
         fz = d.f - zero
@@ -380,108 +422,103 @@ def estimate_corrections(
     res = gI_all - zB_all @ R_BI
     n_eff = max(1.0, len(res) * data[0].dt / 0.2)
     sigma["imu_mount_deg"] = float(np.degrees(np.std(res[:, :2]) / math.sqrt(n_eff)))
-    rpy = _R_to_rpy(R_BI)
+    return R_BI
 
-    # steps 5-6 twice: the second pass computes the relative CoM motion with the
-    # corrected trunk CoM
-    rob_fit = robot
-    for _ in range(2):
-        # 5. gains and mass from the whole-body balance. The vertical CoM acceleration is the
-        # trunk's (accelerometer, world z) plus the CoM's relative to the trunk (kinematics);
-        # both sides low-passed at GAIN_FIT_CUTOFF_HZ. An accelerometer that shakes at the
-        # impacts (RMS above 10 Hz > ACC_QUIET_RMS) would bias the fit: then a_z = 0 over 0.1 s.
-        from scipy.signal import butter, savgol_filter, sosfiltfilt
 
-        A, y = [], []
-        quiet = True
-        for d in data:
-            nyq = 0.5 / d.dt
-            hf = sosfiltfilt(butter(4, min(10.0 / nyq, 0.9), "highpass", output="sos"), d.acc[:, 2])
-            quiet &= float(np.sqrt(np.mean(hf**2))) < ACC_QUIET_RMS
-        for d in data:
-            nyq = 0.5 / d.dt
-            if quiet:
-                acc_B = (d.acc - b_a) @ R_BI.T  # R_BI (acc - b)
-                R_WB = quat_to_rotation(d.quat) @ R_BI.T
-                a_trunk = np.einsum("tj,tj->t", R_WB[:, 2, :], acc_B) - g
-                rel = center_of_mass(rob_fit, np.zeros(3), R_WB, d.q)[:, 2]
-                win = 2 * int(round(0.025 / d.dt)) + 1
-                a_rel = savgol_filter(rel, win, 3, deriv=2, delta=d.dt)
-                sos = butter(4, min(GAIN_FIT_CUTOFF_HZ / nyq, 0.9), output="sos")
-                step = max(1, int(round(0.01 / d.dt)))
-                A.append(sosfiltfilt(sos, d.f - zero, axis=0)[::step])
-                y.append(sosfiltfilt(sos, g + a_trunk + a_rel)[::step])
-            else:
-                n = max(1, int(round(0.1 / d.dt)))
-                A.append(_blocks(d.f - zero, n))
-                y.append(np.full(len(A[-1]), g))
-        A_all, y_all = np.concatenate(A), np.concatenate(y)
-        w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
-        # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
-        reg = (GAIN_RIDGE_QUIET if quiet else GAIN_RIDGE) * float((A_all**2).sum()) / 8.0
-        M = A_all.T @ A_all + reg * np.eye(8)
-        w = np.linalg.solve(M, A_all.T @ y_all + reg * w0)
-        res = y_all - A_all @ w
-        cov = np.linalg.inv(M) * float(np.var(res))
-        km = 1.0 / w  # gain_i * mass
-        if measured_mass_kg is not None:
-            mass = float(measured_mass_kg)
-            gains = km / mass
-        else:
-            mass = float(np.mean(km))
-            gains = km / mass
-        for i, s in enumerate(SENSOR_NAMES):
-            sigma[f"gain_{s}"] = float(math.sqrt(max(cov[i, i], 0.0)) * km[i] ** 2 / mass)
-        var_km = np.clip(np.diag(cov), 0.0, None) * km**4
-        sigma["mass_kg"] = float(math.sqrt(var_km.sum()) / 8.0)
+def _gain_fit_rows(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.ndarray,
+                   R_BI: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Rows ``A`` (loads [N]) and ``y`` (vertical CoM acceleration + g [m/s^2]) of the
+    whole-body balance, and whether the accelerometer was quiet.
 
-        # 6. trunk CoM from mean(CoP - CoM)
-        rob_c = dataclasses.replace(robot, mass=mass)
-        diffs_xy = []
-        p_F = robot.sensor_positions_in_foot()
-        for d in data:
-            fz = (d.f - zero) / gains
+    The vertical CoM acceleration is the trunk's (accelerometer, world z) plus the CoM's
+    relative to the trunk (kinematics); both sides low-passed at GAIN_FIT_CUTOFF_HZ. An
+    accelerometer that shakes at the impacts (RMS above 10 Hz > ACC_QUIET_RMS) would bias
+    the fit: then a_z = 0 over 0.1 s.
+    """
+    from scipy.signal import butter, savgol_filter, sosfiltfilt
+
+    g = rob_fit.gravity
+    A, y = [], []
+    quiet = True
+    for d in data:
+        nyq = 0.5 / d.dt
+        hf = sosfiltfilt(butter(4, min(10.0 / nyq, 0.9), "highpass", output="sos"), d.acc[:, 2])
+        quiet &= float(np.sqrt(np.mean(hf**2))) < ACC_QUIET_RMS
+    for d in data:
+        nyq = 0.5 / d.dt
+        if quiet:
+            acc_B = (d.acc - b_a) @ R_BI.T  # R_BI (acc - b)
             R_WB = quat_to_rotation(d.quat) @ R_BI.T
-            # yaw-free trunk frame: remove the trunk's heading
-            yaw = np.arctan2(R_WB[:, 1, 0], R_WB[:, 0, 0])
-            c, s_ = np.cos(-yaw), np.sin(-yaw)
-            Rz = np.zeros_like(R_WB)
-            Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s_, s_, c
-            Rz[:, 2, 2] = 1.0
-            R_H = Rz @ R_WB
-            com = center_of_mass(rob_c, np.zeros(3), R_H, d.q)
-            num = np.zeros((len(fz), 2))
-            for si, sd in enumerate(SIDES):
-                p_S, R_S = leg_fk(rob_c, sd, np.zeros(3), R_H, d.q[:, 6 * si : 6 * si + 6])
-                for k in range(4):
-                    pk = p_S + R_S @ np.array([p_F[k, 0], p_F[k, 1], 0.0])
-                    num += fz[:, 4 * si + k, None] * pk[:, :2]
-            tot = fz.sum(axis=1)
-            ok = tot > 0.5 * rob_c.weight
-            cop = num[ok] / tot[ok, None]
-            diffs_xy.append(cop - com[ok, :2])
-        dxy = np.concatenate(diffs_xy)
-        frac = robot.trunk_mass_fraction
-        d_com = dxy.mean(axis=0) / frac
-        sigma["trunk_com_m"] = float(
-            np.std(dxy) / frac / math.sqrt(max(1.0, len(dxy) * data[0].dt / 1.0))
-        )
-        rob_fit = dataclasses.replace(
-            robot, trunk_com_x=robot.trunk_com_x + float(d_com[0]),
-            trunk_com_y=robot.trunk_com_y + float(d_com[1]),
-        )
-    return ModelCorrections(
-        mass_kg=mass,
-        trunk_com_x_m=float(robot.trunk_com_x + d_com[0]),
-        trunk_com_y_m=float(robot.trunk_com_y + d_com[1]),
-        imu_mount_rpy_deg=tuple(float(v) for v in np.degrees(rpy)),
-        gyro_bias_rad_s=tuple(float(v) for v in b_g),
-        acc_bias_m_s2=tuple(float(v) for v in b_a),
-        load_cell_gain={s: float(v) for s, v in zip(SENSOR_NAMES, gains, strict=True)},
-        load_cell_zero_n={s: float(v) for s, v in zip(SENSOR_NAMES, zero, strict=True)},
-        sigma=sigma,
-        measured_mass=measured_mass_kg is not None,
+            a_trunk = np.einsum("tj,tj->t", R_WB[:, 2, :], acc_B) - g
+            rel = center_of_mass(rob_fit, np.zeros(3), R_WB, d.q)[:, 2]
+            win = 2 * int(round(0.025 / d.dt)) + 1
+            a_rel = savgol_filter(rel, win, 3, deriv=2, delta=d.dt)
+            sos = butter(4, min(GAIN_FIT_CUTOFF_HZ / nyq, 0.9), output="sos")
+            step = max(1, int(round(0.01 / d.dt)))
+            A.append(sosfiltfilt(sos, d.f - zero, axis=0)[::step])
+            y.append(sosfiltfilt(sos, g + a_trunk + a_rel)[::step])
+        else:
+            n = max(1, int(round(0.1 / d.dt)))
+            A.append(_blocks(d.f - zero, n))
+            y.append(np.full(len(A[-1]), g))
+    return np.concatenate(A), np.concatenate(y), bool(quiet)
+
+
+def _fit_gains(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.ndarray,
+               R_BI: np.ndarray, measured_mass_kg: float | None,
+               sigma: dict[str, float]) -> tuple[float, np.ndarray]:
+    """Stage 5: mass [kg] and load-cell gains (8,) from the whole-body balance."""
+    A_all, y_all, quiet = _gain_fit_rows(data, rob_fit, zero, b_a, R_BI)
+    w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
+    # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
+    reg = (GAIN_RIDGE_QUIET if quiet else GAIN_RIDGE) * float((A_all**2).sum()) / 8.0
+    M = A_all.T @ A_all + reg * np.eye(8)
+    w = np.linalg.solve(M, A_all.T @ y_all + reg * w0)
+    res = y_all - A_all @ w
+    cov = np.linalg.inv(M) * float(np.var(res))
+    km = 1.0 / w  # gain_i * mass
+    mass = float(measured_mass_kg) if measured_mass_kg is not None else float(np.mean(km))
+    gains = km / mass
+    for i, s in enumerate(SENSOR_NAMES):
+        sigma[f"gain_{s}"] = float(math.sqrt(max(cov[i, i], 0.0)) * km[i] ** 2 / mass)
+    var_km = np.clip(np.diag(cov), 0.0, None) * km**4
+    sigma["mass_kg"] = float(math.sqrt(var_km.sum()) / 8.0)
+    return mass, gains
+
+
+def _fit_trunk_com(data: list, robot: RobotConfig, mass: float, gains: np.ndarray,
+                   zero: np.ndarray, R_BI: np.ndarray, sigma: dict[str, float]) -> np.ndarray:
+    """Stage 6: trunk CoM correction [m] (2,) from mean(CoP - CoM)."""
+    rob_c = dataclasses.replace(robot, mass=mass)
+    diffs_xy = []
+    p_F = robot.sensor_positions_in_foot()
+    for d in data:
+        fz = (d.f - zero) / gains
+        R_WB = quat_to_rotation(d.quat) @ R_BI.T
+        # yaw-free trunk frame: remove the trunk's heading
+        yaw = np.arctan2(R_WB[:, 1, 0], R_WB[:, 0, 0])
+        c, s_ = np.cos(-yaw), np.sin(-yaw)
+        Rz = np.zeros_like(R_WB)
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s_, s_, c
+        Rz[:, 2, 2] = 1.0
+        R_H = Rz @ R_WB
+        com = center_of_mass(rob_c, np.zeros(3), R_H, d.q)
+        num = np.zeros((len(fz), 2))
+        for si, sd in enumerate(SIDES):
+            p_S, R_S = leg_fk(rob_c, sd, np.zeros(3), R_H, d.q[:, 6 * si : 6 * si + 6])
+            for k in range(4):
+                pk = p_S + R_S @ np.array([p_F[k, 0], p_F[k, 1], 0.0])
+                num += fz[:, 4 * si + k, None] * pk[:, :2]
+        tot = fz.sum(axis=1)
+        ok = tot > 0.5 * rob_c.weight
+        cop = num[ok] / tot[ok, None]
+        diffs_xy.append(cop - com[ok, :2])
+    dxy = np.concatenate(diffs_xy)
+    frac = robot.trunk_mass_fraction
+    sigma["trunk_com_m"] = float(
+        np.std(dxy) / frac / math.sqrt(max(1.0, len(dxy) * data[0].dt / 1.0))
     )
+    return dxy.mean(axis=0) / frac
 
 
 def _so3_log(R: np.ndarray) -> np.ndarray:

@@ -147,10 +147,6 @@ def run_campaign(
     Returns:
         A :class:`RunSummary`.
     """
-    from distributed import Client, as_completed
-
-    from grfguard.campaign.work import run_cell, simulate_walk
-
     t0 = time.perf_counter()
     cells = spec.cells()
     store = ResultStore(out_dir)
@@ -159,6 +155,36 @@ def run_campaign(
     todo = [c for c in cells if c.cell_id not in done]
     if not todo:
         return RunSummary(len(cells), len(cells), 0, 0, 0, time.perf_counter() - t0, 0.0, "")
+
+    client, own_cluster = _connect(client, scheduler, n_workers)
+    try:
+        address = str(client.scheduler.address)
+        t1 = time.perf_counter()
+        sub = _submit(client, todo, retries)
+        with _progress_bar(progress) as bar:
+            task = bar.add_task(spec.name, total=len(todo), failed=0)
+            n_ok, n_failed = _collect(
+                sub, store, on_result, lambda nf: bar.update(task, advance=1, failed=nf))
+        t2 = time.perf_counter()
+        n_workers_seen = len(client.scheduler_info().get("workers", {}))
+        summary = RunSummary(len(cells), len(cells) - len(todo), n_ok, n_failed,
+                             len(sub.walk_order), t2 - t0, t2 - t1, address)
+        store.log_run({**asdict(summary), "cells_per_min": summary.cells_per_min,
+                       "workers": n_workers_seen, "campaign": spec.name,
+                       "load_avg_1min": os.getloadavg()[0],
+                       "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+        return summary
+    finally:
+        if own_cluster is not None:
+            client.close()
+            own_cluster.close()
+        elif scheduler is not None:
+            client.close()
+
+
+def _connect(client: Any, scheduler: str | None, n_workers: int | None) -> tuple[Any, Any]:
+    """The Dask client to use and the local cluster started for it (None if not ours)."""
+    from distributed import Client
 
     own_cluster = None
     if client is None:
@@ -174,66 +200,75 @@ def run_campaign(
         else:
             own_cluster = local_cluster(n_workers)
             client = Client(own_cluster)
-    try:
-        address = str(client.scheduler.address)
-        walks: dict[str, Any] = {}
-        order: list[str] = []
-        for c in todo:
-            if c.walk.walk_id not in walks:
-                walks[c.walk.walk_id] = c.walk
-                order.append(c.walk.walk_id)
-        rank = {wid: i for i, wid in enumerate(order)}
-        remaining = {wid: 0 for wid in order}
-        t1 = time.perf_counter()
-        walk_futs = {
-            wid: client.submit(simulate_walk, walks[wid], key=f"walk-{wid}",
-                               priority=-rank[wid], retries=retries, pure=False)
-            for wid in order
-        }
-        futs = {}
-        by_key = {}
-        for c in todo:
-            wid = c.walk.walk_id
-            f = client.submit(run_cell, c, walk_futs[wid], key=f"cell-{c.cell_id}",
-                              priority=-rank[wid], retries=retries, pure=False)
-            futs[f.key] = f
-            by_key[f.key] = c
-            remaining[wid] += 1
-        n_ok = n_failed = 0
-        with _progress_bar(progress) as bar:
-            task = bar.add_task(spec.name, total=len(todo), failed=0)
-            for fut in as_completed(list(futs.values())):
-                c = by_key[fut.key]
-                if fut.status == "finished":
-                    row = fut.result()
-                    store.write(row)
-                    n_ok += 1
-                    if on_result is not None:
-                        on_result(row)
-                else:
-                    exc = fut.exception()
-                    tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-                    store.write_failure(c.cell_id, tb)
-                    n_failed += 1
-                del futs[fut.key]
-                fut.release()
-                wid = c.walk.walk_id
-                remaining[wid] -= 1
-                if remaining[wid] == 0:
-                    walk_futs.pop(wid).release()
-                bar.update(task, advance=1, failed=n_failed)
-        t2 = time.perf_counter()
-        n_workers_seen = len(client.scheduler_info().get("workers", {}))
-        summary = RunSummary(len(cells), len(cells) - len(todo), n_ok, n_failed, len(order),
-                             t2 - t0, t2 - t1, address)
-        store.log_run({**asdict(summary), "cells_per_min": summary.cells_per_min,
-                       "workers": n_workers_seen, "campaign": spec.name,
-                       "load_avg_1min": os.getloadavg()[0],
-                       "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
-        return summary
-    finally:
-        if own_cluster is not None:
-            client.close()
-            own_cluster.close()
-        elif scheduler is not None:
-            client.close()
+    return client, own_cluster
+
+
+@dataclass
+class _Submitted:
+    """Futures of one run: a walk future per walk, a cell future per cell."""
+
+    walk_futs: dict[str, Any]
+    walk_order: list[str]
+    futs: dict[str, Any]
+    by_key: dict[str, Cell]
+    remaining: dict[str, int]
+
+
+def _submit(client: Any, todo: list[Cell], retries: int) -> _Submitted:
+    """Submit each walk once (in first-use order, earlier walks first) and every cell."""
+    from grfguard.campaign.work import run_cell, simulate_walk
+
+    walks: dict[str, Any] = {}
+    order: list[str] = []
+    for c in todo:
+        if c.walk.walk_id not in walks:
+            walks[c.walk.walk_id] = c.walk
+            order.append(c.walk.walk_id)
+    rank = {wid: i for i, wid in enumerate(order)}
+    remaining = {wid: 0 for wid in order}
+    walk_futs = {
+        wid: client.submit(simulate_walk, walks[wid], key=f"walk-{wid}",
+                           priority=-rank[wid], retries=retries, pure=False)
+        for wid in order
+    }
+    futs = {}
+    by_key = {}
+    for c in todo:
+        wid = c.walk.walk_id
+        f = client.submit(run_cell, c, walk_futs[wid], key=f"cell-{c.cell_id}",
+                          priority=-rank[wid], retries=retries, pure=False)
+        futs[f.key] = f
+        by_key[f.key] = c
+        remaining[wid] += 1
+    return _Submitted(walk_futs, order, futs, by_key, remaining)
+
+
+def _collect(sub: _Submitted, store: ResultStore,
+             on_result: Callable[[dict[str, Any]], None] | None,
+             advance: Callable[[int], Any]) -> tuple[int, int]:
+    """Write every cell's result (or failure) as it completes, release finished walks;
+    returns (cells ok, cells failed)."""
+    from distributed import as_completed
+
+    n_ok = n_failed = 0
+    for fut in as_completed(list(sub.futs.values())):
+        c = sub.by_key[fut.key]
+        if fut.status == "finished":
+            row = fut.result()
+            store.write(row)
+            n_ok += 1
+            if on_result is not None:
+                on_result(row)
+        else:
+            exc = fut.exception()
+            tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+            store.write_failure(c.cell_id, tb)
+            n_failed += 1
+        del sub.futs[fut.key]
+        fut.release()
+        wid = c.walk.walk_id
+        sub.remaining[wid] -= 1
+        if sub.remaining[wid] == 0:
+            sub.walk_futs.pop(wid).release()
+        advance(n_failed)
+    return n_ok, n_failed

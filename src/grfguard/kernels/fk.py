@@ -251,27 +251,8 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     ``ximat (nb, 9)``, ``subtree_com (nb, 3)`` [m], work ``mass_subtree (nb,)``.
     """
     nb = body_parent.shape[0]
-    nj = jnt_type.shape[0]
-    for k in range(qpos.shape[0]):
-        qpos[k] = qpos_in[k]
-    for j in range(nj):
-        t = jnt_type[j]
-        if t == FREE:
-            _normalize4(qpos[jnt_qposadr[j] + 3 : jnt_qposadr[j] + 7])
-        elif t == BALL:
-            _normalize4(qpos[jnt_qposadr[j] : jnt_qposadr[j] + 4])
-    for k in range(3):
-        xpos[0, k] = 0.0
-        xipos[0, k] = 0.0
-    for k in range(4):
-        xquat[0, k] = 0.0
-    xquat[0, 0] = 1.0
-    for k in range(9):
-        xmat[0, k] = 0.0
-        ximat[0, k] = 0.0
-    for k in (0, 4, 8):
-        xmat[0, k] = 1.0
-        ximat[0, k] = 1.0
+    _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
+    _world_frame(xpos, xquat, xmat, xipos, ximat)
     pos = work[0:3]
     quat = work[3:7]
     vec = work[7:10]
@@ -307,22 +288,7 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
                     for k in range(3):
                         pos[k] = pos[k] + vec[k] * s
                 else:
-                    if t == BALL:
-                        for k in range(4):
-                            qloc[k] = qpos[a + k]
-                    else:
-                        ang = qpos[a] - qpos0[a]
-                        if ang == 0:
-                            qloc[0] = 1.0
-                            qloc[1] = 0.0
-                            qloc[2] = 0.0
-                            qloc[3] = 0.0
-                        else:
-                            s = math.sin(ang * 0.5)
-                            qloc[0] = math.cos(ang * 0.5)
-                            qloc[1] = jnt_axis[j, 0] * s
-                            qloc[2] = jnt_axis[j, 1] * s
-                            qloc[3] = jnt_axis[j, 2] * s
+                    _joint_rotation(qloc, t, qpos, a, qpos0[a], jnt_axis[j])
                     _mulquat(quat, quat, qloc)
                     for k in range(3):
                         vec[k] = xanchor[k] - pos[k]
@@ -338,8 +304,66 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     for i in range(1, nb):
         _local2global(xipos[i], ximat[i], body_ipos[i], body_iquat[i], i, body_sameframe[i],
                       xpos, xquat, xmat, xipos, ximat, tmp4, tmp3)
-    # mj_comPos: backward pass for the subtree CoMs
-    # (MuJoCo 4 puts every body's own m x_i in first, then adds the children: same order here)
+    _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
+
+
+@njit
+def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
+    """Copy ``qpos_in`` into ``qpos`` and normalise its free/ball quaternions."""
+    for k in range(qpos.shape[0]):
+        qpos[k] = qpos_in[k]
+    for j in range(jnt_type.shape[0]):
+        t = jnt_type[j]
+        if t == FREE:
+            _normalize4(qpos[jnt_qposadr[j] + 3 : jnt_qposadr[j] + 7])
+        elif t == BALL:
+            _normalize4(qpos[jnt_qposadr[j] : jnt_qposadr[j] + 4])
+
+
+@njit
+def _world_frame(xpos, xquat, xmat, xipos, ximat):
+    """Body 0 (the world): zero position, identity orientation."""
+    for k in range(3):
+        xpos[0, k] = 0.0
+        xipos[0, k] = 0.0
+    for k in range(4):
+        xquat[0, k] = 0.0
+    xquat[0, 0] = 1.0
+    for k in range(9):
+        xmat[0, k] = 0.0
+        ximat[0, k] = 0.0
+    for k in (0, 4, 8):
+        xmat[0, k] = 1.0
+        ximat[0, k] = 1.0
+
+
+@njit
+def _joint_rotation(qloc, t, qpos, a, qpos0_a, axis):
+    """Local rotation ``qloc`` (wxyz) of a ball joint (its quaternion) or a hinge (angle
+    ``qpos[a] - qpos0_a`` [rad] about ``axis``)."""
+    if t == BALL:
+        for k in range(4):
+            qloc[k] = qpos[a + k]
+    else:
+        ang = qpos[a] - qpos0_a
+        if ang == 0:
+            qloc[0] = 1.0
+            qloc[1] = 0.0
+            qloc[2] = 0.0
+            qloc[3] = 0.0
+        else:
+            s = math.sin(ang * 0.5)
+            qloc[0] = math.cos(ang * 0.5)
+            qloc[1] = axis[0] * s
+            qloc[2] = axis[1] * s
+            qloc[3] = axis[2] * s
+
+
+@njit
+def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
+    """mj_comPos: backward pass for the subtree CoMs [m] (MuJoCo 4 puts every body's own
+    m x_i in first, then adds the children: same order here)."""
+    nb = body_parent.shape[0]
     for i in range(nb):
         for k in range(3):
             subtree_com[i, k] = xipos[i, k] * body_mass[i]

@@ -122,32 +122,7 @@ def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
         isfree[j] = 0
     nfree = 0
     for _outer in range(3 * n + 3):
-        # gradient of the negative objective at x (multiplier of the sum row from the
-        # free corners' optimality conditions)
-        gx = 0.0
-        gy = 0.0
-        sx = 0.0
-        for j in range(n):
-            gx += rel[j, 0] * x[j]
-            gy += rel[j, 1] * x[j]
-            sx += x[j]
-        if nfree == 0:
-            lam = RHO * (RHO * total - RHO * sx)
-        else:
-            lam = 0.0
-            for c in range(nfree):
-                j = free[c]
-                lam += rel[j, 0] * gx + rel[j, 1] * gy - w2 * (prior[j] - x[j])
-            lam /= nfree
-        best = -1
-        wbest = 0.0
-        scale = abs(lam) + w2 * (abs(total) + 1.0)
-        for j in range(n):
-            if isfree[j] == 0:
-                wj = -(rel[j, 0] * gx + rel[j, 1] * gy) + lam + w2 * (prior[j] - x[j])
-                if wj > 1e-12 * scale and (best < 0 or wj > wbest):
-                    best = j
-                    wbest = wj
+        best = _entering_corner(rel, prior, total, w2, n, x, free, isfree, nfree)
         if best < 0:
             break
         isfree[best] = 1
@@ -189,6 +164,39 @@ def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
             nfree = keep
             if nfree == 0:
                 break
+
+
+@njit
+def _entering_corner(rel, prior, total, w2, n, x, free, isfree, nfree):
+    """Index of the bound corner with the largest positive gradient of the negative
+    objective at ``x`` (the next to free), or -1 if none (``x`` optimal)."""
+    # gradient of the negative objective at x (multiplier of the sum row from the
+    # free corners' optimality conditions)
+    gx = 0.0
+    gy = 0.0
+    sx = 0.0
+    for j in range(n):
+        gx += rel[j, 0] * x[j]
+        gy += rel[j, 1] * x[j]
+        sx += x[j]
+    if nfree == 0:
+        lam = RHO * (RHO * total - RHO * sx)
+    else:
+        lam = 0.0
+        for c in range(nfree):
+            j = free[c]
+            lam += rel[j, 0] * gx + rel[j, 1] * gy - w2 * (prior[j] - x[j])
+        lam /= nfree
+    best = -1
+    wbest = 0.0
+    scale = abs(lam) + w2 * (abs(total) + 1.0)
+    for j in range(n):
+        if isfree[j] == 0:
+            wj = -(rel[j, 0] * gx + rel[j, 1] * gy) + lam + w2 * (prior[j] - x[j])
+            if wj > 1e-12 * scale and (best < 0 or wj > wbest):
+                best = j
+                wbest = wj
+    return best
 
 
 def new_scratch(n: int = MAX_CORNERS) -> tuple[np.ndarray, ...]:

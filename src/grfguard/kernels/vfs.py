@@ -134,33 +134,66 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     ``body_inertia``, ``corner_radius``, ``filt_*``, ``tree`` and ``sites`` are the
     constants built by :class:`VFSKernel`; ``ws``/``iws`` are float/int scratch.
     Returns True for a valid sample.
+
+    Stages: validity, attitude filter, kinematics, stance, leg odometry, raw rates,
+    filters, ZMP (Newton-Euler), corner contact, compliance prior + QP, outputs.
     """
-    (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
-     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0) = tree
-    site_body, site_sameframe, site_pos, site_quat = sites
-    nb = body_parent.shape[0]
-    nbr = nb - 1
-    nq = qpos0.shape[0]
+    body_mass = tree[8]
+    nb = tree[0].shape[0]
+    nq = tree[13].shape[0]
     order = filt_b.shape[1] - 1
     dt = prm[_P_DT]
     g = prm[_P_G]
-    use_acc = prm[_P_USE_ACC] != 0.0
-    has_gyro = prm[_P_HAS_GYRO] != 0.0
-    has_ref = prm[_P_HAS_REF] != 0.0
-    # ------------------------------------------------------------ validity
+    if not _valid_sample(x, y, state, prm):
+        return False
+    (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
+     v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+     tail) = _scratch_views(ws, nq, nb)
+    aw, ax, ay, az = _attitude_filter(x, state, prm)
+    p_AC0, p_AC1, p_AC2 = _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay,
+                                      az, qpos, xpos, xquat, xmat, xipos, ximat, stc, msub,
+                                      sxp, sxm, qin, pk, tail, iws[32:43])
+    st0, st1 = _stance(x, prm, pk)
+    pwt0, pwt1, pwt2, ground = _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1)
+    com0 = pwt0 + p_AC0
+    com1 = pwt1 + p_AC1
+    com2 = pwt2 + p_AC2
+    _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt)
+    _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
+                   order, dt)
+    F0, F1, F2, ld0, ld1 = _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a,
+                                    v3b, v3c, v3d, aw, ax, ay, az, order, g)
+    # ------------------------------------------------------------ ZMP (Newton-Euler)
+    h = com2 - ground
+    fz = max(F2, 1.0)
+    zmp0 = com0 - (h * F0 + ld1) / fz
+    zmp1 = com1 - (h * F1 - ld0) / fz
+    ctc = iws[0:8]
+    _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
+    _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
+                 qp_dots, iws[8:16], iws[16:24], iws[24:32], tail, F2, zmp0, zmp1)
+    _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
+    return True
+
+
+@njit
+def _valid_sample(x, y, state, prm):
+    """Whether row ``x`` is usable (finite joints, attitude and the optional gyro, acc and
+    contact reference; non-zero quaternion). If not, ``y`` repeats the last output (NaN
+    before the first) with validity 0."""
     ok = True
     for i in range(16):
         if not math.isfinite(x[i]):
             ok = False
-    if has_gyro:
+    if prm[_P_HAS_GYRO] != 0.0:
         for i in range(_I_GYRO, _I_GYRO + 3):
             if not math.isfinite(x[i]):
                 ok = False
-    if use_acc:
+    if prm[_P_USE_ACC] != 0.0:
         for i in range(_I_ACC, _I_ACC + 3):
             if not math.isfinite(x[i]):
                 ok = False
-    if has_ref:
+    if prm[_P_HAS_REF] != 0.0:
         for i in range(_I_REF, _I_REF + 2):
             if not math.isfinite(x[i]):
                 ok = False
@@ -176,78 +209,44 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
             for k in range(N_OUT):
                 y[k] = np.nan
         y[N_OUT - 1] = 0.0
-        return False
-    # ------------------------------------------------------------ scratch views
-    o = 0
-    qpos = ws[o : o + nq]
-    o += nq
-    xpos = ws[o : o + 3 * nb].reshape((nb, 3))
-    o += 3 * nb
-    xquat = ws[o : o + 4 * nb].reshape((nb, 4))
-    o += 4 * nb
-    xmat = ws[o : o + 9 * nb].reshape((nb, 9))
-    o += 9 * nb
-    xipos = ws[o : o + 3 * nb].reshape((nb, 3))
-    o += 3 * nb
-    ximat = ws[o : o + 9 * nb].reshape((nb, 9))
-    o += 9 * nb
-    stc = ws[o : o + 3 * nb].reshape((nb, 3))
-    o += 3 * nb
-    msub = ws[o : o + nb]
-    o += nb
-    sxp = ws[o : o + 33].reshape((11, 3))
-    o += 33
-    sxm = ws[o : o + 99].reshape((11, 9))
-    o += 99
-    qin = ws[o : o + nq]
-    o += nq
-    raw = ws[o : o + 9]
-    o += 9
-    main = ws[o : o + 9]
-    o += 9
-    v3a = ws[o : o + 3]
-    o += 3
-    v3b = ws[o : o + 3]
-    o += 3
-    v3c = ws[o : o + 3]
-    o += 3
-    v3d = ws[o : o + 3]
-    o += 3
-    pk = ws[o : o + 24].reshape((8, 3))
-    o += 24
-    tmp8 = ws[o : o + 8]
-    o += 8
-    prior8 = ws[o : o + 8]
-    o += 8
-    rel8 = ws[o : o + 16].reshape((8, 2))
-    o += 16
-    forces = ws[o : o + 8]
-    o += 8
-    lin = ws[o : o + 3]
-    o += 3
-    cc = ws[o : o + 3]
-    o += 3
-    qp_x = ws[o : o + 8]
-    o += 8
-    qp_z = ws[o : o + 8]
-    o += 8
-    qp_M = ws[o : o + 88].reshape((11, 8))
-    o += 88
-    qp_rhs = ws[o : o + 11]
-    o += 11
-    qp_dots = ws[o : o + 8]
-    o += 8
-    ctc = iws[0:8]
-    qp_free = iws[8:16]
-    qp_isfree = iws[16:24]
-    cidx = iws[24:32]
-    # ------------------------------------------------------------ attitude filter
+    return ok
+
+
+@njit
+def _scratch_views(ws, nq, nb):
+    """Named views into the float scratch ``ws`` (fixed layout); the last one is the
+    rest of ``ws`` (solver and FK work space)."""
+    sizes = (nq, 3 * nb, 4 * nb, 9 * nb, 3 * nb, 9 * nb, 3 * nb, nb, 33, 99, nq, 9, 9, 3, 3,
+             3, 3, 24, 8, 8, 16, 8, 3, 3, 8, 8, 88, 11, 8)
+    o = [0] * (len(sizes) + 1)
+    for i in range(len(sizes)):
+        o[i + 1] = o[i] + sizes[i]
+    return (ws[o[0] : o[1]], ws[o[1] : o[2]].reshape((nb, 3)),
+            ws[o[2] : o[3]].reshape((nb, 4)), ws[o[3] : o[4]].reshape((nb, 9)),
+            ws[o[4] : o[5]].reshape((nb, 3)), ws[o[5] : o[6]].reshape((nb, 9)),
+            ws[o[6] : o[7]].reshape((nb, 3)), ws[o[7] : o[8]],
+            ws[o[8] : o[9]].reshape((11, 3)), ws[o[9] : o[10]].reshape((11, 9)),
+            ws[o[10] : o[11]], ws[o[11] : o[12]], ws[o[12] : o[13]], ws[o[13] : o[14]],
+            ws[o[14] : o[15]], ws[o[15] : o[16]], ws[o[16] : o[17]],
+            ws[o[17] : o[18]].reshape((8, 3)), ws[o[18] : o[19]], ws[o[19] : o[20]],
+            ws[o[20] : o[21]].reshape((8, 2)), ws[o[21] : o[22]], ws[o[22] : o[23]],
+            ws[o[23] : o[24]], ws[o[24] : o[25]], ws[o[25] : o[26]],
+            ws[o[26] : o[27]].reshape((11, 8)), ws[o[27] : o[28]], ws[o[28] : o[29]],
+            ws[o[29] :])
+
+
+@njit
+def _attitude_filter(x, state, prm):
+    """Complementary attitude filter (gyro prediction pulled towards the measured
+    quaternion by ``katt``); returns and stores the unit attitude (w, x, y, z)."""
+    qw, qx, qy, qz = x[12], x[13], x[14], x[15]
     nm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     mw, mx, my, mz = qw / nm, qx / nm, qy / nm, qz / nm
     katt = prm[_P_KATT]
-    if state[_S_ATT_INIT] == 0.0 or katt >= 1.0 or not has_gyro:
+    if state[_S_ATT_INIT] == 0.0 or katt >= 1.0 or prm[_P_HAS_GYRO] == 0.0:
         aw, ax, ay, az = mw, mx, my, mz
     else:
+        dt = prm[_P_DT]
         gx = x[_I_GYRO] * dt
         gy = x[_I_GYRO + 1] * dt
         gz = x[_I_GYRO + 2] * dt
@@ -265,7 +264,17 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     state[_S_ATT + 1] = ax
     state[_S_ATT + 2] = ay
     state[_S_ATT + 3] = az
-    # ------------------------------------------------------------ kinematics
+    return aw, ax, ay, az
+
+
+@njit
+def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, xpos, xquat,
+                xmat, xipos, ximat, stc, msub, sxp, sxm, qin, pk, work, sel):
+    """Forward kinematics with the trunk at the origin: bodies, IMU/corner/sole sites,
+    corner contact points ``pk`` [m]; returns the trunk-relative CoM (3 floats) [m]."""
+    (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
+     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0) = tree
+    site_body, site_sameframe, site_pos, site_quat = sites
     qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
     tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
     nt = math.sqrt(tw * tw + tx * tx + ty * ty + tz * tz)
@@ -274,7 +283,7 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     elif abs(nt - 1.0) > 1e-15:
         inv = 1.0 / nt
         tw, tx, ty, tz = tw * inv, tx * inv, ty * inv, tz * inv
-    for k in range(nq):
+    for k in range(qpos0.shape[0]):
         qin[k] = qpos0[k]
     r = iprm[_IP_ROOT]
     qin[r] = 0.0
@@ -288,23 +297,27 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         qin[iprm[_IP_JOINTS + j]] = x[j]
     fk_tree(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
             body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-            qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, ws[o : o + 27])
-    sel = iws[32:43]
+            qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, work[0:27])
     sel[0] = iprm[_IP_IMU]
     for k in range(8):
         sel[1 + k] = iprm[_IP_CORNERS + k]
     sel[9] = iprm[_IP_SOLES]
     sel[10] = iprm[_IP_SOLES + 1]
     fk_sites(sel, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
-             ximat, sxp, sxm, ws[o : o + 7])
-    trunk = iprm[_IP_TRUNK]
-    p_AC0, p_AC1, p_AC2 = stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
+             ximat, sxp, sxm, work[0:7])
     for k in range(8):
         pk[k, 0] = sxp[1 + k, 0]
         pk[k, 1] = sxp[1 + k, 1]
         pk[k, 2] = sxp[1 + k, 2] - corner_radius[k]
-    # ------------------------------------------------------------ stance
-    if has_ref:
+    trunk = iprm[_IP_TRUNK]
+    return stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
+
+
+@njit
+def _stance(x, prm, pk):
+    """Stance of the right and left foot: the contact reference if logged, else the
+    foot whose lowest corner is within 1 cm of the lowest corner of both."""
+    if prm[_P_HAS_REF] != 0.0:
         st0 = x[_I_REF] > 0.5
         st1 = x[_I_REF + 1] > 0.5
     else:
@@ -313,29 +326,16 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         zmin = min(zr, zl)
         st0 = zr - zmin < 0.01
         st1 = zl - zmin < 0.01
-    # ------------------------------------------------------------ leg odometry (no anchor
-    # attitude: the rotation correction is the identity)
+    return st0, st1
+
+
+@njit
+def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
+    """Leg odometry (no anchor attitude: the rotation correction is the identity):
+    the trunk position in the world (3 floats) [m] and the ground height [m]; the anchor
+    foot switches when the other foot is in stance and flat (or the anchor lifts)."""
     if state[_S_ANCHOR] < 0:
-        if st0 and not st1:
-            anc = 0
-        elif st1 and not st0:
-            anc = 1
-        else:
-            zr = min(pk[0, 2], pk[1, 2], pk[2, 2], pk[3, 2])
-            zl = min(pk[4, 2], pk[5, 2], pk[6, 2], pk[7, 2])
-            anc = 1 if zl < zr - 1e-4 else 0
-        if st0 and st1:
-            mid0 = (sxp[9, 0] + sxp[10, 0]) / 2
-            mid1 = (sxp[9, 1] + sxp[10, 1]) / 2
-        else:
-            f = 0 if st0 else (1 if st1 else anc)
-            mid0 = sxp[9 + f, 0] / 1
-            mid1 = sxp[9 + f, 1] / 1
-        z0 = min(pk[4 * anc, 2], pk[4 * anc + 1, 2], pk[4 * anc + 2, 2], pk[4 * anc + 3, 2])
-        state[_S_PWA] = -mid0 + sxp[9 + anc, 0]
-        state[_S_PWA + 1] = -mid1 + sxp[9 + anc, 1]
-        state[_S_PWA + 2] = -z0 + sxp[9 + anc, 2]
-        state[_S_ANCHOR] = anc
+        _init_anchor(state, pk, sxp, st0, st1)
     a_ = int(state[_S_ANCHOR])
     pwt0 = state[_S_PWA] - sxp[9 + a_, 0]
     pwt1 = state[_S_PWA + 1] - sxp[9 + a_, 1]
@@ -353,10 +353,39 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         state[_S_PWA] = pwt0 + sxp[9 + ob, 0]
         state[_S_PWA + 1] = pwt1 + sxp[9 + ob, 1]
         state[_S_PWA + 2] = pwt2 + sxp[9 + ob, 2]
-    com0 = pwt0 + p_AC0
-    com1 = pwt1 + p_AC1
-    com2 = pwt2 + p_AC2
-    # ------------------------------------------------------------ raw rates
+    return pwt0, pwt1, pwt2, ground
+
+
+@njit
+def _init_anchor(state, pk, sxp, st0, st1):
+    """First anchor foot (the single stance foot, else the lower one) and its world
+    position: the feet's midpoint (or the stance foot) at the origin, the sole on z = 0."""
+    if st0 and not st1:
+        anc = 0
+    elif st1 and not st0:
+        anc = 1
+    else:
+        zr = min(pk[0, 2], pk[1, 2], pk[2, 2], pk[3, 2])
+        zl = min(pk[4, 2], pk[5, 2], pk[6, 2], pk[7, 2])
+        anc = 1 if zl < zr - 1e-4 else 0
+    if st0 and st1:
+        mid0 = (sxp[9, 0] + sxp[10, 0]) / 2
+        mid1 = (sxp[9, 1] + sxp[10, 1]) / 2
+    else:
+        f = 0 if st0 else (1 if st1 else anc)
+        mid0 = sxp[9 + f, 0] / 1
+        mid1 = sxp[9 + f, 1] / 1
+    z0 = min(pk[4 * anc, 2], pk[4 * anc + 1, 2], pk[4 * anc + 2, 2], pk[4 * anc + 3, 2])
+    state[_S_PWA] = -mid0 + sxp[9 + anc, 0]
+    state[_S_PWA + 1] = -mid1 + sxp[9 + anc, 1]
+    state[_S_PWA + 2] = -z0 + sxp[9 + anc, 2]
+    state[_S_ANCHOR] = anc
+
+
+@njit
+def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
+    """Second differences over the last three samples of the IMU-relative CoM
+    (``raw[0:3]``) and the IMU's world position (``raw[6:9]``) [m/s^2]; ``raw`` zeroed."""
     for k in range(9):
         raw[k] = 0.0
     hn = int(state[_S_HN])
@@ -379,7 +408,14 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
                 v1 = (state[h + 6 + k] - state[h + 3 + k]) / dt
                 v0 = (state[h + 3 + k] - state[h + k]) / dt
                 raw[off + k] = (v1 - v0) / dt
-    # angular momentum about the CoM from this and the previous body poses
+
+
+@njit
+def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
+                   order, dt):
+    """Rate of the angular momentum about the CoM (``raw[3:6]``) [N m] from this and the
+    previous body poses (kept in ``state``)."""
+    nbr = nb - 1
     pb = state[_S_FIXED + 15 * order : _S_FIXED + 15 * order + 3 * nbr].reshape((nbr, 3))
     pr = state[_S_FIXED + 15 * order + 3 * nbr : _S_FIXED + 15 * order + 12 * nbr].reshape(
         (nbr, 9)
@@ -391,58 +427,8 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
             for i in range(2, nb):
                 s += xipos[i, k] * body_mass[i]
             cc[k] = s / msum
-        for k in range(3):
-            lin[k] = 0.0
-        L0 = 0.0
-        L1 = 0.0
-        L2 = 0.0
-        for i in range(nbr):
-            bi = i + 1
-            m_i = body_mass[bi]
-            r0 = xipos[bi, 0] - cc[0]
-            r1 = xipos[bi, 1] - cc[1]
-            r2 = xipos[bi, 2] - cc[2]
-            w0 = (xipos[bi, 0] - pb[i, 0]) / dt
-            w1 = (xipos[bi, 1] - pb[i, 1]) / dt
-            w2 = (xipos[bi, 2] - pb[i, 2]) / dt
-            c0 = (r1 * w2 - r2 * w1) * m_i
-            c1 = (r2 * w0 - r0 * w2) * m_i
-            c2 = (r0 * w1 - r1 * w0) * m_i
-            if i == 0:
-                lin[0], lin[1], lin[2] = c0, c1, c2
-            else:
-                lin[0] += c0
-                lin[1] += c1
-                lin[2] += c2
-            R = ximat[bi]
-            P = pr[i]
-            # dR = R P^T as numpy's stacked matmul computes it (fused multiply-adds)
-            d01 = fma(R[2], P[5], fma(R[1], P[4], R[0] * P[3]))
-            d02 = fma(R[2], P[8], fma(R[1], P[7], R[0] * P[6]))
-            d10 = fma(R[5], P[2], fma(R[4], P[1], R[3] * P[0]))
-            d12 = fma(R[5], P[8], fma(R[4], P[7], R[3] * P[6]))
-            d20 = fma(R[8], P[2], fma(R[7], P[1], R[6] * P[0]))
-            d21 = fma(R[8], P[5], fma(R[7], P[4], R[6] * P[3]))
-            om0 = (d21 - d12) / (2.0 * dt)
-            om1 = (d02 - d20) / (2.0 * dt)
-            om2 = (d10 - d01) / (2.0 * dt)
-            # w_B = R^T w, scaled by the inertia, rotated back
-            wb0 = (R[0] * om0 + R[3] * om1 + R[6] * om2) * body_inertia[i, 0]
-            wb1 = (R[1] * om0 + R[4] * om1 + R[7] * om2) * body_inertia[i, 1]
-            wb2 = (R[2] * om0 + R[5] * om1 + R[8] * om2) * body_inertia[i, 2]
-            # (einsum's summation order: first + last, then the middle term)
-            t0 = (R[0] * wb0 + R[2] * wb2) + R[1] * wb1
-            t1 = (R[3] * wb0 + R[5] * wb2) + R[4] * wb1
-            t2 = (R[6] * wb0 + R[8] * wb2) + R[7] * wb1
-            if i == 0:
-                L0, L1, L2 = t0, t1, t2
-            else:
-                L0 += t0
-                L1 += t1
-                L2 += t2
-        L0 = lin[0] + L0
-        L1 = lin[1] + L1
-        L2 = lin[2] + L2
+        L0, L1, L2 = _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc,
+                                       nbr, dt)
         if state[_S_PREVL_OK] != 0.0:
             raw[3] = (L0 - state[_S_PREVL]) / dt
             raw[4] = (L1 - state[_S_PREVL + 1]) / dt
@@ -457,31 +443,78 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         for k in range(9):
             pr[i, k] = ximat[i + 1, k]
     state[_S_PREVF] = 1.0
-    # ------------------------------------------------------------ filters
+
+
+@njit
+def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nbr, dt):
+    """Angular momentum about the CoM ``cc`` (3 floats) [N m s]: the bodies' linear
+    momenta (finite differences of their CoMs ``pb`` -> ``xipos``) plus their spin
+    (finite differences of their orientations ``pr`` -> ``ximat``)."""
+    for k in range(3):
+        lin[k] = 0.0
+    L0 = 0.0
+    L1 = 0.0
+    L2 = 0.0
+    for i in range(nbr):
+        bi = i + 1
+        m_i = body_mass[bi]
+        r0 = xipos[bi, 0] - cc[0]
+        r1 = xipos[bi, 1] - cc[1]
+        r2 = xipos[bi, 2] - cc[2]
+        w0 = (xipos[bi, 0] - pb[i, 0]) / dt
+        w1 = (xipos[bi, 1] - pb[i, 1]) / dt
+        w2 = (xipos[bi, 2] - pb[i, 2]) / dt
+        c0 = (r1 * w2 - r2 * w1) * m_i
+        c1 = (r2 * w0 - r0 * w2) * m_i
+        c2 = (r0 * w1 - r1 * w0) * m_i
+        if i == 0:
+            lin[0], lin[1], lin[2] = c0, c1, c2
+        else:
+            lin[0] += c0
+            lin[1] += c1
+            lin[2] += c2
+        R = ximat[bi]
+        P = pr[i]
+        # dR = R P^T as numpy's stacked matmul computes it (fused multiply-adds)
+        d01 = fma(R[2], P[5], fma(R[1], P[4], R[0] * P[3]))
+        d02 = fma(R[2], P[8], fma(R[1], P[7], R[0] * P[6]))
+        d10 = fma(R[5], P[2], fma(R[4], P[1], R[3] * P[0]))
+        d12 = fma(R[5], P[8], fma(R[4], P[7], R[3] * P[6]))
+        d20 = fma(R[8], P[2], fma(R[7], P[1], R[6] * P[0]))
+        d21 = fma(R[8], P[5], fma(R[7], P[4], R[6] * P[3]))
+        om0 = (d21 - d12) / (2.0 * dt)
+        om1 = (d02 - d20) / (2.0 * dt)
+        om2 = (d10 - d01) / (2.0 * dt)
+        # w_B = R^T w, scaled by the inertia, rotated back
+        wb0 = (R[0] * om0 + R[3] * om1 + R[6] * om2) * body_inertia[i, 0]
+        wb1 = (R[1] * om0 + R[4] * om1 + R[7] * om2) * body_inertia[i, 1]
+        wb2 = (R[2] * om0 + R[5] * om1 + R[8] * om2) * body_inertia[i, 2]
+        # (einsum's summation order: first + last, then the middle term)
+        t0 = (R[0] * wb0 + R[2] * wb2) + R[1] * wb1
+        t1 = (R[3] * wb0 + R[5] * wb2) + R[4] * wb1
+        t2 = (R[6] * wb0 + R[8] * wb2) + R[7] * wb1
+        if i == 0:
+            L0, L1, L2 = t0, t1, t2
+        else:
+            L0 += t0
+            L1 += t1
+            L2 += t2
+    return lin[0] + L0, lin[1] + L1, lin[2] + L2
+
+
+@njit
+def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v3d, aw, ax,
+             ay, az, order, g):
+    """Low-pass the raw rates and (if used) fuse the accelerometer; returns the total
+    force ``F0, F1, F2`` [N] and the angular momentum rate ``ld0, ld1`` [N m]."""
     zo = _S_FIXED
     zlp = state[zo : zo + 9 * order].reshape((order, 9))
     zfu = state[zo + 9 * order : zo + 12 * order].reshape((order, 3))
     zac = state[zo + 12 * order : zo + 15 * order].reshape((order, 3))
     _lfilter_step(filt_b[0], filt_a[0], zlp, raw, main, filt_zi[0], state[_S_LP_OK] == 0.0)
     state[_S_LP_OK] = 1.0
-    if use_acc:
-        # acc_W = R(q_att) acc - g e_z  (R from the normalised attitude, numpy's formula)
-        n3 = math.sqrt(aw * aw + ax * ax + ay * ay + az * az)
-        w_, x_, y_, z_ = aw / n3, ax / n3, ay / n3, az / n3
-        r00 = 1 - 2 * (y_ * y_ + z_ * z_)
-        r01 = 2 * (x_ * y_ - w_ * z_)
-        r02 = 2 * (x_ * z_ + w_ * y_)
-        r10 = 2 * (x_ * y_ + w_ * z_)
-        r11 = 1 - 2 * (x_ * x_ + z_ * z_)
-        r12 = 2 * (y_ * z_ - w_ * x_)
-        r20 = 2 * (x_ * z_ - w_ * y_)
-        r21 = 2 * (y_ * z_ + w_ * x_)
-        r22 = 1 - 2 * (x_ * x_ + y_ * y_)
-        a0, a1, a2 = x[_I_ACC], x[_I_ACC + 1], x[_I_ACC + 2]
-        # (einsum's summation order: first + last, then the middle term)
-        v3a[0] = ((r00 * a0 + r02 * a2) + r01 * a1) - 0.0
-        v3a[1] = ((r10 * a0 + r12 * a2) + r11 * a1) - 0.0
-        v3a[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
+    if prm[_P_USE_ACC] != 0.0:
+        _world_acc(v3a, x, aw, ax, ay, az, g)
         for k in range(3):
             v3b[k] = raw[6 + k] - v3a[k]
         _lfilter_step(filt_b[2], filt_a[2], zac, v3a, v3c, filt_zi[2], state[_S_ACC_OK] == 0.0)
@@ -503,15 +536,36 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
     else:
         ld0, ld1 = 0.0, 0.0
     mass = prm[_P_MASS]
-    F0 = mass * (cdd0 + 0.0)
-    F1 = mass * (cdd1 + 0.0)
-    F2 = mass * (cdd2 + g)
-    # ------------------------------------------------------------ ZMP (Newton-Euler)
-    h = com2 - ground
-    fz = max(F2, 1.0)
-    zmp0 = com0 - (h * F0 + ld1) / fz
-    zmp1 = com1 - (h * F1 - ld0) / fz
-    # ------------------------------------------------------------ corner contact
+    return mass * (cdd0 + 0.0), mass * (cdd1 + 0.0), mass * (cdd2 + g), ld0, ld1
+
+
+@njit
+def _world_acc(out, x, aw, ax, ay, az, g):
+    """acc_W = R(q_att) acc - g e_z [m/s^2] (R from the normalised attitude, numpy's
+    formula) into ``out``."""
+    n3 = math.sqrt(aw * aw + ax * ax + ay * ay + az * az)
+    w_, x_, y_, z_ = aw / n3, ax / n3, ay / n3, az / n3
+    r00 = 1 - 2 * (y_ * y_ + z_ * z_)
+    r01 = 2 * (x_ * y_ - w_ * z_)
+    r02 = 2 * (x_ * z_ + w_ * y_)
+    r10 = 2 * (x_ * y_ + w_ * z_)
+    r11 = 1 - 2 * (x_ * x_ + z_ * z_)
+    r12 = 2 * (y_ * z_ - w_ * x_)
+    r20 = 2 * (x_ * z_ - w_ * y_)
+    r21 = 2 * (y_ * z_ + w_ * x_)
+    r22 = 1 - 2 * (x_ * x_ + y_ * y_)
+    a0, a1, a2 = x[_I_ACC], x[_I_ACC + 1], x[_I_ACC + 2]
+    # (einsum's summation order: first + last, then the middle term)
+    out[0] = ((r00 * a0 + r02 * a2) + r01 * a1) - 0.0
+    out[1] = ((r10 * a0 + r12 * a2) + r11 * a1) - 0.0
+    out[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
+
+
+@njit
+def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
+    """Move the corners ``pk`` to the world, ``tmp8`` = their height above ground [m];
+    ``ctc`` (0/1) = corners in contact (the stance foot's corners, or with the kinematic
+    test the corners below the contact height and the lowest corner of a stance foot)."""
     ch = prm[_P_CH]
     for k in range(8):
         pk[k, 0] = pwt0 + pk[k, 0]
@@ -535,7 +589,13 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
             hm = hr if k < 4 else hl
             low = tmp8[k] < ch
             ctc[k] = 1 if (low or (foot and not (hm < ch) and tmp8[k] == hm)) else 0
-    # ------------------------------------------------------------ compliance prior + QP
+
+
+@njit
+def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+                 qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1):
+    """Compliance prior + QP: the corner forces ``forces`` [N] (0 off contact, NaN if an
+    input is not finite) summing to ``F2`` with their CoP at the ZMP."""
     cnt = 0
     for k in range(8):
         cnt += ctc[k]
@@ -568,7 +628,7 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         # compact copies for the solver
         for c in range(m):
             tmp8[c] = prior8[cidx[c]]
-        relc = ws[o : o + 2 * m].reshape((m, 2))
+        relc = work[0 : 2 * m].reshape((m, 2))
         for c in range(m):
             relc[c, 0] = rel8[cidx[c], 0]
             relc[c, 1] = rel8[cidx[c], 1]
@@ -584,7 +644,11 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
                 qp_x[c] = qp_x[c] * f
         for c in range(m):
             forces[cidx[c]] = qp_x[c]
-    # ------------------------------------------------------------ outputs
+
+
+@njit
+def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
+    """Write the output row ``y`` (:data:`OUT_COLUMNS`) and keep it in ``state``."""
     for k in range(8):
         y[k] = forces[k]
     y[8] = com0
@@ -613,7 +677,6 @@ def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a
         state[_S_LAST + k] = y[k]
     state[_S_HAS_LAST] = 1.0
     state[_S_N] += 1.0
-    return True
 
 
 @njit

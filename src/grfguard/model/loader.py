@@ -214,29 +214,7 @@ def load_model(desc: RobotDescription, gravity: float = 9.81) -> LoadedRobot:
         base.add_freejoint(name="root")
     imu_b = _body(spec, desc.imu_body, desc, "imu.body")
     imu_b.add_site(name="imu", pos=desc.imu.pos, quat=desc.imu.quat())
-    for s, foot in zip(SIDES, desc.feet, strict=True):
-        fb = _body(spec, foot.body, desc, f"feet.{s}.body")
-        q_sole = foot.sole.quat()
-        fb.add_site(name=f"{s}_sole", pos=foot.sole.pos, quat=q_sole)
-        R = foot.sole.rotation()
-        p0 = np.asarray(foot.sole.pos)
-        if desc.sensing == "ft":
-            fb.add_site(name=f"{s}_ft", pos=foot.ft.pos, quat=foot.ft.quat())
-            c = p0 + R @ np.array([0.0, 0.0, SOLE_THICKNESS / 2])
-            fb.add_geom(name=f"{s}_sole_box", type=mujoco.mjtGeom.mjGEOM_BOX,
-                        size=[foot.length / 2, foot.width / 2, SOLE_THICKNESS / 2],
-                        pos=c, quat=q_sole, contype=1, conaffinity=0, friction=[1, 0.005, 1e-4],
-                        mass=0)
-        else:
-            for k, (x, y) in enumerate(foot.corners_in_sole(), start=1):
-                c = p0 + R @ np.array([x, y, CONTACT_RADIUS])
-                fb.add_geom(name=f"{s}{k}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE,
-                            size=[CONTACT_RADIUS, 0, 0], pos=c, contype=1, conaffinity=0,
-                            friction=[1, 0.005, 1e-4], mass=0)
-                fb.add_site(name=f"{s}{k}", pos=c, size=[2 * CONTACT_RADIUS, 0, 0])
-        # a truth site enclosing the whole sole: total normal force of the foot
-        fb.add_site(name=f"{s}_sole_touch", type=mujoco.mjtGeom.mjGEOM_BOX, pos=p0,
-                    quat=q_sole, size=[foot.length / 2 + 0.02, foot.width / 2 + 0.02, 0.03])
+    _add_feet(spec, desc)
     floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE,
                                     size=[0, 0, 1], contype=0, conaffinity=1)
     floor.friction = [1.0, 0.005, 1e-4]
@@ -263,6 +241,49 @@ def load_model(desc: RobotDescription, gravity: float = 9.81) -> LoadedRobot:
     if not joints:
         raise ConfigError(f"{desc.model}: the model has no hinge joints")
     legs = tuple(leg_joints(model, f.body, base_name) for f in desc.feet)
+    leg_len = _check_legs(model, desc, joints, legs, base_name)
+    mass = float(model.body_subtreemass[0])
+    kp = servo_gains(model, joints, legs, mass, leg_len, gravity)
+    model = _add_servos_and_sensors(spec, desc, joints, kp, mass, leg_len)
+    return LoadedRobot(desc, model, joints, legs, base_name, mass, leg_len, kp)
+
+
+def _add_feet(spec: mujoco.MjSpec, desc: RobotDescription) -> None:
+    """Sole site, contacts (a sole box for F/T sensing, else four corner spheres with
+    their sites) and a truth touch site enclosing the sole, on each foot."""
+    for s, foot in zip(SIDES, desc.feet, strict=True):
+        fb = _body(spec, foot.body, desc, f"feet.{s}.body")
+        q_sole = foot.sole.quat()
+        fb.add_site(name=f"{s}_sole", pos=foot.sole.pos, quat=q_sole)
+        R = foot.sole.rotation()
+        p0 = np.asarray(foot.sole.pos)
+        if desc.sensing == "ft":
+            fb.add_site(name=f"{s}_ft", pos=foot.ft.pos, quat=foot.ft.quat())
+            c = p0 + R @ np.array([0.0, 0.0, SOLE_THICKNESS / 2])
+            fb.add_geom(name=f"{s}_sole_box", type=mujoco.mjtGeom.mjGEOM_BOX,
+                        size=[foot.length / 2, foot.width / 2, SOLE_THICKNESS / 2],
+                        pos=c, quat=q_sole, contype=1, conaffinity=0, friction=[1, 0.005, 1e-4],
+                        mass=0)
+        else:
+            for k, (x, y) in enumerate(foot.corners_in_sole(), start=1):
+                c = p0 + R @ np.array([x, y, CONTACT_RADIUS])
+                fb.add_geom(name=f"{s}{k}_contact", type=mujoco.mjtGeom.mjGEOM_SPHERE,
+                            size=[CONTACT_RADIUS, 0, 0], pos=c, contype=1, conaffinity=0,
+                            friction=[1, 0.005, 1e-4], mass=0)
+                fb.add_site(name=f"{s}{k}", pos=c, size=[2 * CONTACT_RADIUS, 0, 0])
+        # a truth site enclosing the whole sole: total normal force of the foot
+        fb.add_site(name=f"{s}_sole_touch", type=mujoco.mjtGeom.mjGEOM_BOX, pos=p0,
+                    quat=q_sole, size=[foot.length / 2 + 0.02, foot.width / 2 + 0.02, 0.03])
+
+
+def _check_legs(model: mujoco.MjModel, desc: RobotDescription, joints: tuple[str, ...],
+                legs: tuple[tuple[str, ...], ...], base_name: str) -> float:
+    """Check that every leg has 6 hinges, the nominal joints exist and each sole lies
+    below its ankle facing up at the zero posture; returns the hip-to-sole length [m].
+
+    Raises:
+        ConfigError: On the first violation (file, key and value named).
+    """
     for s, leg, f in zip(SIDES, legs, desc.feet, strict=True):
         if len(leg) < 6:
             raise ConfigError(
@@ -291,10 +312,7 @@ def load_model(desc: RobotDescription, gravity: float = 9.81) -> LoadedRobot:
                 "frame's z axis must point up (out of the sole) in the zero posture")
     leg_len = float(np.mean([hips[i][2] - data.site(f"{s}_sole").xpos[2]
                              for i, s in enumerate(SIDES)]))
-    mass = float(model.body_subtreemass[0])
-    kp = servo_gains(model, joints, legs, mass, leg_len, gravity)
-    model = _add_servos_and_sensors(spec, desc, joints, kp, mass, leg_len)
-    return LoadedRobot(desc, model, joints, legs, base_name, mass, leg_len, kp)
+    return leg_len
 
 
 def _add_servos_and_sensors(spec, desc, joints, kp, mass, leg_len) -> mujoco.MjModel:

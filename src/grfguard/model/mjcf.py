@@ -279,75 +279,109 @@ def build_mjcf(robot: RobotConfig) -> str:
         children.setdefault(s.parent, []).append(s)
     armature = joint_armature(robot)
     gains = actuator_gains(robot)
+    joints = [s.joint for s in specs if s.joint is not None]
+    actuators = [
+        f'    <position name="{j}" joint="{j}" kp="{_f(gains[j][0])}" kv="{_f(gains[j][1])}"/>'
+        for j in joints
+    ]
+    ground = 4.0 + 2.0 * robot.leg_length
+    lines = [
+        f'<mujoco model="{robot.name}">',
+        '  <compiler angle="radian" autolimits="true"/>',
+        f'  <option timestep="0.001" integrator="implicitfast" '
+        f'gravity="0 0 {_f(-robot.gravity)}"/>',
+        "  <worldbody>",
+        f'    <geom name="ground" type="plane" size="{_f(50 * ground)} {_f(ground)} 0.1" '
+        'contype="0" conaffinity="1" rgba="0.8 0.8 0.8 1"/>',
+        '    <light pos="0 0 3" dir="0 0 -1" directional="true"/>',
+        *_body_xml(robot, specs[0], 2, children, armature),
+        "  </worldbody>",
+        "  <actuator>",
+        *actuators,
+        "  </actuator>",
+        "  <sensor>",
+        *_sensors_xml(joints),
+        "  </sensor>",
+        "</mujoco>",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _geoms_xml(robot: RobotConfig, spec: BodySpec, ind: str) -> list[str]:
+    """Geoms and sites of one body (trunk box + IMU site, limb capsules, foot box with
+    the sole site and the four contact spheres and corner sites), indented by ``ind``."""
     r_limb = _limb_radius(robot)
     rc = robot.contact_radius
-    corners = robot.sensor_positions_in_foot()
     h = robot.sole_to_ankle
     ax = robot.ankle_offset_x
-
-    def geoms(spec: BodySpec, ind: str) -> list[str]:
-        vis = 'contype="0" conaffinity="0" group="1" mass="0"'
-        base = spec.name.split("_", 1)[-1] if spec.name != "trunk" else "trunk"
-        if base == "trunk":
-            size = (robot.trunk_depth / 2, _trunk_width(robot) / 2, robot.trunk_height / 2)
-            return [
-                f'{ind}<geom name="trunk_geom" type="box" size="{_v(size)}" '
-                f'pos="0 0 {_f(robot.trunk_com_height)}" rgba="0.6 0.6 0.7 1" {vis}/>',
-                f'{ind}<site name="imu" pos="0 0 0" size="0.01"/>',
-            ]
-        if base == "thigh":
-            return [
-                f'{ind}<geom type="capsule" fromto="0 0 0 0 0 {_f(-robot.upper_leg_length)}" '
-                f'size="{_f(r_limb)}" rgba="0.7 0.5 0.3 1" {vis}/>'
-            ]
-        if base == "shank":
-            return [
-                f'{ind}<geom type="capsule" fromto="0 0 0 0 0 {_f(-robot.lower_leg_length)}" '
-                f'size="{_f(0.8 * r_limb)}" rgba="0.7 0.5 0.3 1" {vis}/>'
-            ]
-        if base == "foot":
-            side = spec.name[0]
-            out = [
-                f'{ind}<geom type="box" '
-                f'size="{_v((robot.foot_length / 2, robot.foot_width / 2, h / 2 - rc))}" '
-                f'pos="{_v((-ax, 0.0, -h / 2 + rc))}" rgba="0.3 0.3 0.3 0.6" {vis}/>',
-                f'{ind}<site name="{side}_sole" pos="{_v((-ax, 0.0, -h))}" size="0.005"/>',
-            ]
-            for k in range(4):
-                p = (-ax + corners[k, 0], corners[k, 1], -h + rc)
-                out.append(
-                    f'{ind}<geom name="{side}{k + 1}_contact" type="sphere" size="{_f(rc)}" '
-                    f'pos="{_v(p)}" contype="1" conaffinity="0" condim="3" mass="0" '
-                    f'rgba="0.9 0.1 0.1 1"/>'
-                )
-                out.append(
-                    f'{ind}<site name="{side}{k + 1}" type="sphere" '
-                    f'size="{_f(CORNER_SITE_RADIUS_FACTOR * rc)}" pos="{_v(p)}"/>'
-                )
-            return out
+    vis = 'contype="0" conaffinity="0" group="1" mass="0"'
+    base = spec.name.split("_", 1)[-1] if spec.name != "trunk" else "trunk"
+    if base == "trunk":
+        size = (robot.trunk_depth / 2, _trunk_width(robot) / 2, robot.trunk_height / 2)
+        return [
+            f'{ind}<geom name="trunk_geom" type="box" size="{_v(size)}" '
+            f'pos="0 0 {_f(robot.trunk_com_height)}" rgba="0.6 0.6 0.7 1" {vis}/>',
+            f'{ind}<site name="imu" pos="0 0 0" size="0.01"/>',
+        ]
+    if base == "thigh":
+        return [
+            f'{ind}<geom type="capsule" fromto="0 0 0 0 0 {_f(-robot.upper_leg_length)}" '
+            f'size="{_f(r_limb)}" rgba="0.7 0.5 0.3 1" {vis}/>'
+        ]
+    if base == "shank":
+        return [
+            f'{ind}<geom type="capsule" fromto="0 0 0 0 0 {_f(-robot.lower_leg_length)}" '
+            f'size="{_f(0.8 * r_limb)}" rgba="0.7 0.5 0.3 1" {vis}/>'
+        ]
+    if base != "foot":
         return []
-
-    def body(spec: BodySpec, depth: int) -> list[str]:
-        ind = "  " * depth
-        lines = [f'{ind}<body name="{spec.name}" pos="{_v(spec.pos_in_parent)}">']
-        if spec.joint is None:
-            lines.append(f'{ind}  <freejoint name="root"/>')
-        else:
-            lines.append(
-                f'{ind}  <joint name="{spec.joint}" type="hinge" axis="{_v(spec.axis)}" '
-                f'armature="{_f(armature)}"/>'
-            )
-        lines.append(
-            f'{ind}  <inertial pos="{_v(spec.com_in_body)}" mass="{_f(spec.mass)}" '
-            f'diaginertia="{_v(spec.inertia_diag)}"/>'
+    corners = robot.sensor_positions_in_foot()
+    side = spec.name[0]
+    out = [
+        f'{ind}<geom type="box" '
+        f'size="{_v((robot.foot_length / 2, robot.foot_width / 2, h / 2 - rc))}" '
+        f'pos="{_v((-ax, 0.0, -h / 2 + rc))}" rgba="0.3 0.3 0.3 0.6" {vis}/>',
+        f'{ind}<site name="{side}_sole" pos="{_v((-ax, 0.0, -h))}" size="0.005"/>',
+    ]
+    for k in range(4):
+        p = (-ax + corners[k, 0], corners[k, 1], -h + rc)
+        out.append(
+            f'{ind}<geom name="{side}{k + 1}_contact" type="sphere" size="{_f(rc)}" '
+            f'pos="{_v(p)}" contype="1" conaffinity="0" condim="3" mass="0" '
+            f'rgba="0.9 0.1 0.1 1"/>'
         )
-        lines.extend(geoms(spec, ind + "  "))
-        for child in children.get(spec.name, []):
-            lines.extend(body(child, depth + 1))
-        lines.append(f"{ind}</body>")
-        return lines
+        out.append(
+            f'{ind}<site name="{side}{k + 1}" type="sphere" '
+            f'size="{_f(CORNER_SITE_RADIUS_FACTOR * rc)}" pos="{_v(p)}"/>'
+        )
+    return out
 
-    joints = [s.joint for s in specs if s.joint is not None]
+
+def _body_xml(robot: RobotConfig, spec: BodySpec, depth: int,
+              children: dict[str, list[BodySpec]], armature: float) -> list[str]:
+    """``<body>`` element of ``spec`` and, recursively, of its children."""
+    ind = "  " * depth
+    lines = [f'{ind}<body name="{spec.name}" pos="{_v(spec.pos_in_parent)}">']
+    if spec.joint is None:
+        lines.append(f'{ind}  <freejoint name="root"/>')
+    else:
+        lines.append(
+            f'{ind}  <joint name="{spec.joint}" type="hinge" axis="{_v(spec.axis)}" '
+            f'armature="{_f(armature)}"/>'
+        )
+    lines.append(
+        f'{ind}  <inertial pos="{_v(spec.com_in_body)}" mass="{_f(spec.mass)}" '
+        f'diaginertia="{_v(spec.inertia_diag)}"/>'
+    )
+    lines.extend(_geoms_xml(robot, spec, ind + "  "))
+    for child in children.get(spec.name, []):
+        lines.extend(_body_xml(robot, child, depth + 1, children, armature))
+    lines.append(f"{ind}</body>")
+    return lines
+
+
+def _sensors_xml(joints: list[str]) -> list[str]:
+    """``<sensor>`` entries: measured (touch, IMU, encoders), then truth."""
     sensors = []
     for side in SIDES:
         for k in range(1, 5):
@@ -376,31 +410,7 @@ def build_mjcf(robot: RobotConfig) -> str:
                 f'    <framepos name="truth_corner_{side}{k}_pos" objtype="site" '
                 f'objname="{side}{k}"/>'
             )
-    actuators = [
-        f'    <position name="{j}" joint="{j}" kp="{_f(gains[j][0])}" kv="{_f(gains[j][1])}"/>'
-        for j in joints
-    ]
-    ground = 4.0 + 2.0 * robot.leg_length
-    lines = [
-        f'<mujoco model="{robot.name}">',
-        '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="0.001" integrator="implicitfast" '
-        f'gravity="0 0 {_f(-robot.gravity)}"/>',
-        "  <worldbody>",
-        f'    <geom name="ground" type="plane" size="{_f(50 * ground)} {_f(ground)} 0.1" '
-        'contype="0" conaffinity="1" rgba="0.8 0.8 0.8 1"/>',
-        '    <light pos="0 0 3" dir="0 0 -1" directional="true"/>',
-        *body(specs[0], 2),
-        "  </worldbody>",
-        "  <actuator>",
-        *actuators,
-        "  </actuator>",
-        "  <sensor>",
-        *sensors,
-        "  </sensor>",
-        "</mujoco>",
-    ]
-    return "\n".join(lines) + "\n"
+    return sensors
 
 
 @functools.lru_cache(maxsize=16)

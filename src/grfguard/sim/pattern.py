@@ -269,43 +269,15 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
         ConfigError: If the gait does not fit the robot (e.g. unreachable footholds).
     """
     gait = resolve_gait(robot, gait)
-    g = robot.gravity
     zc = float(gait.com_height)
     n_t = int(round(gait.duration * SAMPLE_RATE))
     t = np.arange(n_t) * _DT
     n = gait.n_steps
-    T, Tds = gait.step_period, gait.double_support_time
-    ts = gait.start_time
-    L = gait.step_length
-    half_w = robot.hip_width / 2
+    T, ts = gait.step_period, gait.start_time
 
-    # ---- footprints: footsteps[i, j] = foot i (0 right, 1 left) after step j
-    footsteps = np.zeros((2, n + 1, 2))
-    footsteps[0, :, 1] = -half_w
-    footsteps[1, :, 1] = half_w
-    swing = np.empty(n, dtype=int)  # index of the swinging foot in each step (1-based j)
-    first = 0 if gait.first_swing == "r" else 1
-    for j in range(1, n + 1):
-        sw = first if j % 2 == 1 else 1 - first  # the feet alternate from first_swing
-        swing[j - 1] = sw
-        footsteps[:, j, 0] = footsteps[:, j - 1, 0]
-        footsteps[sw, j, 0] = (j - 1) * L if j == n else j * L
+    footsteps, swing = _footsteps(robot, gait)
     step_times = ts + np.arange(n) * T
-
-    # ---- ZMP reference knots (piecewise linear)
-    mid0 = footsteps[:, 0].mean(axis=0)
-    kt = [0.0, ts]
-    kp = [mid0, mid0]
-    for j in range(1, n + 1):
-        sup = 1 - swing[j - 1]
-        kt += [ts + (j - 1) * T + Tds, ts + j * T]
-        kp += [footsteps[sup, j - 1], footsteps[sup, j - 1]]
-    t_end = ts + n * T
-    mid_end = footsteps[:, n].mean(axis=0)
-    kt += [t_end + Tds, gait.duration + gait.preview_horizon + 1.0]
-    kp += [mid_end, mid_end]
-    kt_a = np.asarray(kt)
-    kp_a = np.asarray(kp)
+    kt_a, kp_a = _zmp_knots(gait, footsteps, swing)
     zmp = np.column_stack([np.interp(t, kt_a, kp_a[:, 0]), np.interp(t, kt_a, kp_a[:, 1])])
 
     # ---- feet at the 1 kHz samples and on the preview grid
@@ -316,30 +288,10 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     sole, contact = _feet(t, footsteps, swing, gait)
     sole_p, _ = _feet(tp, footsteps, swing, gait)
 
-    # ---- preview control on its grid. Stage 1: cart-table model. Stage 2 (Kajita's
-    # two-stage scheme, ``gait.zmp_passes`` times): the multibody ZMP of the planned
-    # motion (legs included) is computed, and the preview controller run on the ZMP
-    # error shifts the CoM plan so the multibody ZMP follows the reference.
+    # ---- two-stage preview control on its grid, CoM resampled to 1 kHz
     zmp_p = np.column_stack([np.interp(tp, kt_a, kp_a[:, 0]), np.interp(tp, kt_a, kp_a[:, 1])])
-    states, jerk = preview_control(zmp_p, dtp, zc, g, gait.preview_horizon)
-    pelvis_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
-    for pass_i in range(gait.zmp_passes + 1):
-        com_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
-        pelvis_p, q_p = _pelvis_for_com(robot, com_p, sole_p, gait.com_iterations, pelvis_p)
-        if pass_i == gait.zmp_passes:
-            break
-        err = zmp_p - multibody_zmp(robot, tp, pelvis_p, q_p)
-        d_states, d_jerk = preview_control(err, dtp, zc, g, gait.preview_horizon, start=0.0)
-        states, jerk = states + d_states, jerk + d_jerk
-
-    # exact (constant-jerk) resampling of the CoM to 1 kHz
-    k = np.arange(n_t) // sub
-    tau = (t - k * dtp)[:, None]
-    c0, c1, c2, u = states[k, 0], states[k, 1], states[k, 2], jerk[k]
-    com_xy = c0 + c1 * tau + c2 * tau**2 / 2 + u * tau**3 / 6
-    vel_xy = c1 + c2 * tau + u * tau**2 / 2
-    com_ref = np.column_stack([com_xy, np.full(n_t, zc)])
-    com_vel_ref = np.column_stack([vel_xy, np.zeros(n_t)])
+    states, jerk, pelvis_p = _two_stage_preview(robot, gait, tp, zmp_p, sole_p)
+    com_ref, com_vel_ref = _resample_com(t, dtp, sub, states, jerk, zc)
 
     # ---- pelvis at 1 kHz: the smooth pelvis-minus-CoM offset of the grid, cubic spline
     eye = np.eye(3)
@@ -350,13 +302,7 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     com_err = float(
         np.abs(center_of_mass(robot, pelvis[check], eye, q[check]) - com_ref[check]).max()
     )
-    reach = _reach_margin(robot, pelvis, sole)
-    if reach < 0.0:
-        i_bad = int(np.argmin(_reach_all(robot, pelvis, sole)))
-        raise ConfigError(
-            f"gait does not fit the robot: at t = {t[i_bad]:.3f} s a foot is out of reach "
-            f"by {-reach * 1000:.1f} mm; shorten step_length or lower com_height"
-        )
+    _check_reach(robot, t, pelvis, sole)
     qd = np.gradient(q, _DT, axis=0)
     tau_ff = None
     if gait.torque_feedforward:
@@ -378,6 +324,95 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
         com_model_error=com_err,
         tau_ff=tau_ff,
     )
+
+
+def _footsteps(robot: RobotConfig, gait: GaitConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Footprints ``footsteps[i, j]`` (2, n + 1, 2) [m] = foot i (0 right, 1 left) after
+    step j, and the index of the swinging foot of each step (n,)."""
+    n, L = gait.n_steps, gait.step_length
+    half_w = robot.hip_width / 2
+    footsteps = np.zeros((2, n + 1, 2))
+    footsteps[0, :, 1] = -half_w
+    footsteps[1, :, 1] = half_w
+    swing = np.empty(n, dtype=int)  # index of the swinging foot in each step (1-based j)
+    first = 0 if gait.first_swing == "r" else 1
+    for j in range(1, n + 1):
+        sw = first if j % 2 == 1 else 1 - first  # the feet alternate from first_swing
+        swing[j - 1] = sw
+        footsteps[:, j, 0] = footsteps[:, j - 1, 0]
+        footsteps[sw, j, 0] = (j - 1) * L if j == n else j * L
+    return footsteps, swing
+
+
+def _zmp_knots(gait: GaitConfig, footsteps: np.ndarray,
+               swing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Knot times [s] and positions (K, 2) [m] of the piecewise-linear ZMP reference."""
+    n, T, Tds, ts = gait.n_steps, gait.step_period, gait.double_support_time, gait.start_time
+    mid0 = footsteps[:, 0].mean(axis=0)
+    kt = [0.0, ts]
+    kp = [mid0, mid0]
+    for j in range(1, n + 1):
+        sup = 1 - swing[j - 1]
+        kt += [ts + (j - 1) * T + Tds, ts + j * T]
+        kp += [footsteps[sup, j - 1], footsteps[sup, j - 1]]
+    t_end = ts + n * T
+    mid_end = footsteps[:, n].mean(axis=0)
+    kt += [t_end + Tds, gait.duration + gait.preview_horizon + 1.0]
+    kp += [mid_end, mid_end]
+    return np.asarray(kt), np.asarray(kp)
+
+
+def _two_stage_preview(
+    robot: RobotConfig, gait: GaitConfig, tp: np.ndarray, zmp_p: np.ndarray, sole_p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Preview control on its grid ``tp``: CoM states (N, 3, 2), jerks (N, 2) and the
+    pelvis positions (N, 3) [m].
+
+    Stage 1: cart-table model. Stage 2 (Kajita's two-stage scheme, ``gait.zmp_passes``
+    times): the multibody ZMP of the planned motion (legs included) is computed, and the
+    preview controller run on the ZMP error shifts the CoM plan so the multibody ZMP
+    follows the reference.
+    """
+    g, zc, dtp = robot.gravity, float(gait.com_height), gait.preview_dt
+    n_p = len(tp)
+    states, jerk = preview_control(zmp_p, dtp, zc, g, gait.preview_horizon)
+    pelvis_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
+    for pass_i in range(gait.zmp_passes + 1):
+        com_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
+        pelvis_p, q_p = _pelvis_for_com(robot, com_p, sole_p, gait.com_iterations, pelvis_p)
+        if pass_i == gait.zmp_passes:
+            break
+        err = zmp_p - multibody_zmp(robot, tp, pelvis_p, q_p)
+        d_states, d_jerk = preview_control(err, dtp, zc, g, gait.preview_horizon, start=0.0)
+        states, jerk = states + d_states, jerk + d_jerk
+    return states, jerk, pelvis_p
+
+
+def _resample_com(t: np.ndarray, dtp: float, sub: int, states: np.ndarray, jerk: np.ndarray,
+                  zc: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact (constant-jerk) resampling of the CoM to the samples ``t``: position (T, 3)
+    [m] at height ``zc`` and velocity (T, 3) [m/s]."""
+    n_t = len(t)
+    k = np.arange(n_t) // sub
+    tau = (t - k * dtp)[:, None]
+    c0, c1, c2, u = states[k, 0], states[k, 1], states[k, 2], jerk[k]
+    com_xy = c0 + c1 * tau + c2 * tau**2 / 2 + u * tau**3 / 6
+    vel_xy = c1 + c2 * tau + u * tau**2 / 2
+    com_ref = np.column_stack([com_xy, np.full(n_t, zc)])
+    com_vel_ref = np.column_stack([vel_xy, np.zeros(n_t)])
+    return com_ref, com_vel_ref
+
+
+def _check_reach(robot: RobotConfig, t: np.ndarray, pelvis: np.ndarray,
+                 sole: np.ndarray) -> None:
+    """Raise :class:`ConfigError` if a foot is out of the legs' reach at some sample."""
+    reach = _reach_margin(robot, pelvis, sole)
+    if reach < 0.0:
+        i_bad = int(np.argmin(_reach_all(robot, pelvis, sole)))
+        raise ConfigError(
+            f"gait does not fit the robot: at t = {t[i_bad]:.3f} s a foot is out of reach "
+            f"by {-reach * 1000:.1f} mm; shorten step_length or lower com_height"
+        )
 
 
 def _feet(

@@ -120,21 +120,8 @@ def run_physics(
         perturb(model)
     data = mujoco.MjData(model)
     index = _sensor_index(model)
-    # actuator order = joint order of the model; map to JOINT_NAMES
-    act_cols = [JOINT_NAMES.index(model.actuator(i).name) for i in range(model.nu)]
-    ctrl = plan.q_ref + KV_OVER_KP * plan.qd_ref
-    if plan.tau_ff is not None:
-        kp = np.array([actuator_gains(robot)[j][0] for j in JOINT_NAMES])
-        ctrl = ctrl + plan.tau_ff / kp
-    ctrl = ctrl[:, act_cols]
-    # initial state: planned pose at rest
-    data.qpos[:3] = plan.pelvis_pos[0]
-    data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
-    for i, name in enumerate(JOINT_NAMES):
-        data.qpos[model.jnt_qposadr[model.joint(name).id]] = plan.q_ref[0, i]
-    data.qvel[:] = 0.0
-    data.ctrl[:] = ctrl[0]
-    mujoco.mj_forward(model, data)
+    ctrl = _controls(robot, plan, model)
+    _start_at_rest(model, data, plan, ctrl[0])
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     n_t = plan.time.size
     out = np.empty((n_t, model.nsensordata))
@@ -154,24 +141,55 @@ def run_physics(
         )
         out[k0:k1] = sens[0]
         warm = data.qacc_warmstart.copy()
-        tilt = _tilt_deg(out[k0:k1, tilt_sl])
-        low = out[k0:k1, com_sl][:, 2] < com_min
-        bad = (tilt > FALL_TILT_DEG) | low
-        if bad.any():
-            i = int(np.argmax(bad))
-            t = plan.time[k0 + i]
-            reason = (
-                f"trunk tilt {tilt[i]:.1f} deg > {FALL_TILT_DEG} deg"
-                if tilt[i] > FALL_TILT_DEG
-                else f"CoM height {out[k0 + i, com_sl][2]:.3f} m < {com_min:.3f} m"
-            )
-            raise SimulationError(
-                f"robot {robot.name!r} fell at t = {t:.3f} s ({reason}) with gait "
-                f"{plan.gait.to_dict()}; try shorter or slower steps"
-            )
+        _check_fall(robot, plan, k0, out[k0:k1, tilt_sl], out[k0:k1, com_sl], com_min)
         if progress is not None:
             progress(progress_offset + progress_scale * k1 / n_t)
     return PhysicsResult(out, index)
+
+
+def _controls(robot: RobotConfig, plan: WalkPlan, model: mujoco.MjModel) -> np.ndarray:
+    """Position-servo controls (T, nu) in the model's actuator order: ``q_ref`` plus the
+    velocity feed-forward and the torque feed-forward divided by the servo gain."""
+    # actuator order = joint order of the model; map to JOINT_NAMES
+    act_cols = [JOINT_NAMES.index(model.actuator(i).name) for i in range(model.nu)]
+    ctrl = plan.q_ref + KV_OVER_KP * plan.qd_ref
+    if plan.tau_ff is not None:
+        kp = np.array([actuator_gains(robot)[j][0] for j in JOINT_NAMES])
+        ctrl = ctrl + plan.tau_ff / kp
+    return ctrl[:, act_cols]
+
+
+def _start_at_rest(model: mujoco.MjModel, data: mujoco.MjData, plan: WalkPlan,
+                   ctrl0: np.ndarray) -> None:
+    """Initial state: the planned pose at rest, upright, first controls applied."""
+    data.qpos[:3] = plan.pelvis_pos[0]
+    data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+    for i, name in enumerate(JOINT_NAMES):
+        data.qpos[model.jnt_qposadr[model.joint(name).id]] = plan.q_ref[0, i]
+    data.qvel[:] = 0.0
+    data.ctrl[:] = ctrl0
+    mujoco.mj_forward(model, data)
+
+
+def _check_fall(robot: RobotConfig, plan: WalkPlan, k0: int, base_quat: np.ndarray,
+                com_pos: np.ndarray, com_min: float) -> None:
+    """Raise :class:`SimulationError` at the first sample of a chunk (starting at sample
+    ``k0``) whose trunk tilt exceeds FALL_TILT_DEG or whose CoM is below ``com_min`` [m]."""
+    tilt = _tilt_deg(base_quat)
+    low = com_pos[:, 2] < com_min
+    bad = (tilt > FALL_TILT_DEG) | low
+    if bad.any():
+        i = int(np.argmax(bad))
+        t = plan.time[k0 + i]
+        reason = (
+            f"trunk tilt {tilt[i]:.1f} deg > {FALL_TILT_DEG} deg"
+            if tilt[i] > FALL_TILT_DEG
+            else f"CoM height {com_pos[i][2]:.3f} m < {com_min:.3f} m"
+        )
+        raise SimulationError(
+            f"robot {robot.name!r} fell at t = {t:.3f} s ({reason}) with gait "
+            f"{plan.gait.to_dict()}; try shorter or slower steps"
+        )
 
 
 def _small_rotation(rotvec: np.ndarray) -> np.ndarray:
@@ -255,17 +273,7 @@ def simulate(
 
     gait = GaitConfig() if gait is None else gait
     noise = NoiseConfig() if noise is None else noise
-    for name, val, typ in (
-        ("robot", robot, RobotConfig),
-        ("gait", gait, GaitConfig),
-        ("noise", noise, NoiseConfig),
-    ):
-        if not isinstance(val, typ):
-            raise ConfigError(
-                f"simulate({name}=...) needs a {typ.__name__}, got {type(val).__name__}"
-            )
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
-        raise ConfigError(f"simulate(seed=...) needs an integer, got {seed!r}")
+    _check_arguments(robot, gait, noise, seed)
     if progress is not None:
         progress(0.0)
     plan = plan_walk(robot, gait)
@@ -300,14 +308,42 @@ def simulate(
     return df
 
 
+def _check_arguments(robot: Any, gait: Any, noise: Any, seed: Any) -> None:
+    """Raise :class:`ConfigError` if an argument of :func:`simulate` has the wrong type."""
+    for name, val, typ in (
+        ("robot", robot, RobotConfig),
+        ("gait", gait, GaitConfig),
+        ("noise", noise, NoiseConfig),
+    ):
+        if not isinstance(val, typ):
+            raise ConfigError(
+                f"simulate({name}=...) needs a {typ.__name__}, got {type(val).__name__}"
+            )
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool):
+        raise ConfigError(f"simulate(seed=...) needs an integer, got {seed!r}")
+
+
 def _log_columns(
     robot: RobotConfig, plan: WalkPlan, phys: PhysicsResult, noise: NoiseConfig, seed: int
 ) -> dict[str, np.ndarray]:
-    n_t = plan.time.size
+    """Every log column: measured IMU, encoders, plan, load cells, then the truth.
+
+    One ``numpy.random.default_rng(seed)`` draws in a fixed order: IMU biases and noise
+    (:func:`_imu_columns`), then load-cell noise (:func:`_force_columns`).
+    """
     rng = np.random.default_rng(seed)
     cols: dict[str, np.ndarray] = {"time": np.round(plan.time, 9)}
+    _imu_columns(cols, robot, phys, noise, rng)
+    _encoder_and_plan_columns(cols, plan, phys, noise)
+    f_all = _force_columns(cols, phys, noise, rng)
+    _truth_columns(cols, phys, f_all)
+    return cols
 
-    # IMU: accelerometer and gyro with constant bias + white noise, attitude error
+
+def _imu_columns(cols: dict[str, np.ndarray], robot: RobotConfig, phys: PhysicsResult,
+                 noise: NoiseConfig, rng: np.random.Generator) -> None:
+    """IMU: accelerometer and gyro with constant bias + white noise, attitude error."""
+    n_t = len(cols["time"])
     acc_bias = rng.normal(0.0, noise.acc_bias_sigma, 3) if noise.acc_bias_sigma > 0 else np.zeros(3)
     gyro_bias = (
         rng.normal(0.0, noise.gyro_bias_sigma, 3) if noise.gyro_bias_sigma > 0 else np.zeros(3)
@@ -337,7 +373,10 @@ def _log_columns(
     for i, a in enumerate("wxyz"):
         cols[f"imu_quat_{a}"] = quat[:, i]
 
-    # encoders
+
+def _encoder_and_plan_columns(cols: dict[str, np.ndarray], plan: WalkPlan,
+                              phys: PhysicsResult, noise: NoiseConfig) -> None:
+    """Quantized encoders ``q_<joint>`` [rad], the plan's ZMP [m] and contact (0/1)."""
     res = 2 * np.pi / noise.encoder_counts_per_rev if noise.encoder_counts_per_rev else 0.0
     for j in JOINT_NAMES:
         q = phys[f"jointpos_{j}"][:, 0]
@@ -348,6 +387,11 @@ def _log_columns(
     for i, s in enumerate(SIDES):
         cols[f"contact_ref_{s}"] = plan.contact_ref[:, i].astype(np.int64)
 
+
+def _force_columns(cols: dict[str, np.ndarray], phys: PhysicsResult, noise: NoiseConfig,
+                   rng: np.random.Generator) -> np.ndarray:
+    """Noisy ``force_<s>`` and ``true_force_<s>`` [N]; returns the true forces (T, 8)."""
+    n_t = len(cols["time"])
     true_force = {s: phys[f"touch_{s}"][:, 0] for s in SENSOR_NAMES}
     force_noise = (
         rng.normal(0.0, noise.force_sigma, (n_t, len(SENSOR_NAMES)))
@@ -358,18 +402,18 @@ def _log_columns(
         cols[f"force_{s}"] = true_force[s] + force_noise[:, k]
     for s in SENSOR_NAMES:
         cols[f"true_force_{s}"] = true_force[s].copy()
+    return np.column_stack([true_force[s] for s in SENSOR_NAMES])
 
+
+def _truth_columns(cols: dict[str, np.ndarray], phys: PhysicsResult, f_all: np.ndarray) -> None:
+    """Truth: CoM, ZMP, base pose, CoM velocity, per-foot CoP, soles, contact, tilt."""
     com = phys["truth_com_pos"]
     for i, a in enumerate("xyz"):
         cols[f"true_com_{a}"] = com[:, i].copy()
     # ZMP on flat ground = CoP of the corner normal forces (contacts lie below the
     # sphere centres, so the centres' xy are the contact points' xy)
-    f_all = np.column_stack([true_force[s] for s in SENSOR_NAMES])
     p_all = np.stack([phys[f"truth_corner_{s}_pos"] for s in SENSOR_NAMES], axis=1)
-    total = f_all.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        zmp = np.einsum("tk,tka->ta", f_all, p_all[:, :, :2]) / total[:, None]
-    zmp[total < 1.0] = np.nan
+    zmp = _cop(f_all, p_all[:, :, :2])
     cols["true_zmp_x"], cols["true_zmp_y"] = zmp[:, 0], zmp[:, 1]
     base = phys["truth_base_pos"]
     for i, a in enumerate("xyz"):
@@ -383,12 +427,7 @@ def _log_columns(
     for i, a in enumerate("xyz"):
         cols[f"true_com_vel_{a}"] = vel[:, i].copy()
     for si, s in enumerate(SIDES):
-        f = f_all[:, 4 * si : 4 * si + 4]
-        p = p_all[:, 4 * si : 4 * si + 4, :2]
-        tot = f.sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cop = np.einsum("tk,tka->ta", f, p) / tot[:, None]
-        cop[tot < 1.0] = np.nan
+        cop = _cop(f_all[:, 4 * si : 4 * si + 4], p_all[:, 4 * si : 4 * si + 4, :2])
         cols[f"true_cop_{s}_x"], cols[f"true_cop_{s}_y"] = cop[:, 0], cop[:, 1]
     for s in SIDES:
         sp = phys[f"truth_sole_{s}_pos"]
@@ -401,4 +440,13 @@ def _log_columns(
             np.int64
         )
     cols["true_trunk_tilt"] = _tilt_deg(bq)
-    return cols
+
+
+def _cop(f: np.ndarray, p_xy: np.ndarray) -> np.ndarray:
+    """Centre of pressure (T, 2) [m] of forces ``f`` (T, K) [N] at points ``p_xy``
+    (T, K, 2) [m]; NaN where the total is below 1 N."""
+    tot = f.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cop = np.einsum("tk,tka->ta", f, p_xy) / tot[:, None]
+    cop[tot < 1.0] = np.nan
+    return cop

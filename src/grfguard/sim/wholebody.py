@@ -198,30 +198,9 @@ def plan_wholebody(robot: LoadedRobot, gait: GaitConfig, ik_dt: float = 0.01,
         ConfigError: If the IK cannot reach the planned feet (gait too long or CoM too
             high for the legs).
     """
-    m = robot.model
     ik = _IK(robot)
-    qpos = _nominal_qpos(robot)
-    d = ik.d
-    d.qpos[:] = qpos
-    mujoco.mj_kinematics(m, d)
-    mujoco.mj_comPos(m, d)
-    soles0 = np.array([d.site_xpos[s].copy() for s in ik.sites])
-    com0 = d.subtree_com[ik.base].copy()
-    z_sole = soles0[:, 2].mean()
-    half_w = 0.5 * (soles0[1, 1] - soles0[0, 1])
-    # stand on the ground, sole centres at x = 0, feet centred on y = 0
-    shift = np.array([-soles0[:, 0].mean(), -soles0[:, 1].mean(), -z_sole])
-    qpos[:3] += shift
-    com_straight = com0[2] - z_sole
-    com_h = gait.com_height if gait.com_height is not None else (
-        com_straight - 0.10 * robot.leg_length)
-    swing_h = gait.swing_height if gait.swing_height is not None else 0.06 * robot.leg_length
-    gait = dataclasses.replace(gait, com_height=float(com_h), swing_height=float(swing_h))
-    if gait.step_length > 0.4 * robot.leg_length:
-        raise ConfigError(
-            f"gait.step_length = {gait.step_length} m is too long for {robot.description.name}"
-            f" (hip-to-sole {robot.leg_length:.3f} m); use at most "
-            f"{0.4 * robot.leg_length:.3f} m")
+    qpos, half_w, gait = _stand_and_resolve(robot, ik, gait)
+    com_h = gait.com_height
 
     n_t = int(round(gait.duration * SAMPLE_RATE))
     t = np.arange(n_t) * _DT
@@ -241,25 +220,8 @@ def plan_wholebody(robot: LoadedRobot, gait: GaitConfig, ik_dt: float = 0.01,
                              np.interp(ti, tp, states[:, 0, 1]), np.full(n_i, com_h)])
     sole_i, _ = _feet(ti, footsteps, swing, gait)
     legs_adr = ik.leg_q
-    # bend the knees a little so the IK starts away from the straight-leg singularity
-    for leg in robot.leg_joints:
-        for j, sgn in ((leg[3], 1.0), (leg[2], -0.5), (leg[4], -0.5)):
-            lo, hi = m.jnt_range[m.joint(j).id]
-            bend = 0.3 * sgn if (lo <= 0.3 * sgn <= hi or lo == hi) else -0.3 * sgn
-            qpos[m.jnt_qposadr[m.joint(j).id]] = bend
-    qpos[2] -= 0.02 * robot.leg_length
-    base_i = np.empty((n_i, 3))
-    q_i = np.empty((n_i, legs_adr.size))
-    worst = 0.0
-    for k in range(n_i):
-        err = ik.solve(qpos, com_i[k], sole_i[:, k], 60 if k == 0 else 3)
-        worst = max(worst, err)
-        base_i[k] = qpos[:3]
-        q_i[k] = qpos[legs_adr]
-    if worst > 1e-3:
-        raise ConfigError(
-            f"gait does not fit {robot.description.name}: whole-body IK residual "
-            f"{1000 * worst:.1f} mm; shorten step_length or lower com_height")
+    _bend_knees(robot, qpos)
+    base_i, q_i, worst = _solve_ik_grid(robot, ik, qpos, com_i, sole_i)
     base_sp = CubicSpline(ti, base_i)
     q_sp = CubicSpline(ti, q_i)
     base = base_sp(t)
@@ -285,6 +247,78 @@ def plan_wholebody(robot: LoadedRobot, gait: GaitConfig, ik_dt: float = 0.01,
         step_times=gait.start_time + np.arange(gait.n_steps) * gait.step_period,
         ik_error=worst,
     )
+
+
+def _stand_and_resolve(robot: LoadedRobot, ik: _IK,
+                       gait: GaitConfig) -> tuple[np.ndarray, float, GaitConfig]:
+    """Nominal pose standing on the ground (sole centres at x = 0, feet centred on y = 0),
+    half the distance between the soles [m], and the gait with the robot's CoM height
+    (10 % of the leg below straight legs) and swing height (6 % of the leg) filled in.
+
+    Raises:
+        ConfigError: If the step is longer than 40 % of the leg.
+    """
+    m = robot.model
+    qpos = _nominal_qpos(robot)
+    d = ik.d
+    d.qpos[:] = qpos
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    soles0 = np.array([d.site_xpos[s].copy() for s in ik.sites])
+    com0 = d.subtree_com[ik.base].copy()
+    z_sole = soles0[:, 2].mean()
+    half_w = 0.5 * (soles0[1, 1] - soles0[0, 1])
+    # stand on the ground, sole centres at x = 0, feet centred on y = 0
+    shift = np.array([-soles0[:, 0].mean(), -soles0[:, 1].mean(), -z_sole])
+    qpos[:3] += shift
+    com_straight = com0[2] - z_sole
+    com_h = gait.com_height if gait.com_height is not None else (
+        com_straight - 0.10 * robot.leg_length)
+    swing_h = gait.swing_height if gait.swing_height is not None else 0.06 * robot.leg_length
+    gait = dataclasses.replace(gait, com_height=float(com_h), swing_height=float(swing_h))
+    if gait.step_length > 0.4 * robot.leg_length:
+        raise ConfigError(
+            f"gait.step_length = {gait.step_length} m is too long for {robot.description.name}"
+            f" (hip-to-sole {robot.leg_length:.3f} m); use at most "
+            f"{0.4 * robot.leg_length:.3f} m")
+    return qpos, half_w, gait
+
+
+def _bend_knees(robot: LoadedRobot, qpos: np.ndarray) -> None:
+    """Bend the knees a little (in place) so the IK starts away from the straight-leg
+    singularity, and lower the base by 2 % of the leg."""
+    m = robot.model
+    for leg in robot.leg_joints:
+        for j, sgn in ((leg[3], 1.0), (leg[2], -0.5), (leg[4], -0.5)):
+            lo, hi = m.jnt_range[m.joint(j).id]
+            bend = 0.3 * sgn if (lo <= 0.3 * sgn <= hi or lo == hi) else -0.3 * sgn
+            qpos[m.jnt_qposadr[m.joint(j).id]] = bend
+    qpos[2] -= 0.02 * robot.leg_length
+
+
+def _solve_ik_grid(robot: LoadedRobot, ik: _IK, qpos: np.ndarray, com_i: np.ndarray,
+                   sole_i: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Whole-body IK at every grid point (warm-started from the previous one, ``qpos``
+    updated in place): base positions (N, 3) [m], leg joints (N, n_legs) [rad] and the
+    worst residual [m].
+
+    Raises:
+        ConfigError: If the worst residual exceeds 1 mm.
+    """
+    n_i, legs_adr = len(com_i), ik.leg_q
+    base_i = np.empty((n_i, 3))
+    q_i = np.empty((n_i, legs_adr.size))
+    worst = 0.0
+    for k in range(n_i):
+        err = ik.solve(qpos, com_i[k], sole_i[:, k], 60 if k == 0 else 3)
+        worst = max(worst, err)
+        base_i[k] = qpos[:3]
+        q_i[k] = qpos[legs_adr]
+    if worst > 1e-3:
+        raise ConfigError(
+            f"gait does not fit {robot.description.name}: whole-body IK residual "
+            f"{1000 * worst:.1f} mm; shorten step_length or lower com_height")
+    return base_i, q_i, worst
 
 
 def _feedforward(robot, ti, base_sp, q_sp, legs_adr, qpos_nominal, right_share) -> np.ndarray:
