@@ -24,7 +24,7 @@ import pandas as pd
 from grfguard.errors import LogFormatError
 from grfguard.model.description import SIDES
 
-__all__ = ["described_robot", "with_described_vfs"]
+__all__ = ["described_robot", "is_described", "run_described", "with_described_vfs"]
 
 
 def described_robot(df: pd.DataFrame, robot: Any = None) -> Any:
@@ -78,3 +78,40 @@ def with_described_vfs(df: pd.DataFrame, robot: Any = None, **kwargs: Any) -> pd
             out[f"contact_est_{s}"] = est.contact[:, i].astype(float)
     out.attrs = dict(df.attrs)
     return out
+
+
+def is_described(df: pd.DataFrame) -> bool:
+    """True when ``df``'s metadata names a described robot (``robot_name`` and
+    ``sensing``; written by the whole-body simulation and by ``grfguard run --robot``)."""
+    return "robot_name" in df.attrs and "sensing" in df.attrs
+
+
+def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd.DataFrame:
+    """The monitor over a log of a described robot.
+
+    Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
+    then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path.
+
+    Args:
+        df: The log.
+        config: A :class:`~grfguard.detect.config.MonitorConfig` (default thresholds
+            when None).
+        robot: As in :func:`described_robot`.
+
+    Raises:
+        LogFormatError: The robot's sensing is not supported by the monitor.
+    """
+    from grfguard.detect.detector import VFS_TOTAL_COLUMNS
+    from grfguard.detect.monitor import Monitor
+    from grfguard.io.schema import vfs_col
+    from grfguard.model.robot import SENSOR_NAMES
+
+    sensing = df.attrs.get("sensing")
+    if sensing == "corners":
+        need = [vfs_col(s) for s in SENSOR_NAMES] + list(VFS_TOTAL_COLUMNS)
+        if not all(c in df.columns for c in need):
+            df = with_described_vfs(df, robot)
+        return Monitor.for_log(df, config).run(df)
+    raise LogFormatError(
+        f"the monitor does not watch {sensing!r} sensing yet (robot "
+        f"{df.attrs.get('robot_name')!r}); corner load cells ('corners') are supported")
