@@ -20,7 +20,7 @@ except Exception:  # pragma: no cover
 from typer.testing import CliRunner  # noqa: E402
 
 from grfguard.cli import app  # noqa: E402
-from grfguard.detect.monitor import Monitor, MonitorConfig  # noqa: E402
+from grfguard.detect.monitor import MonitorConfig  # noqa: E402
 from grfguard.estimate.described import run_described, with_described_vfs  # noqa: E402
 from grfguard.evaluate.detection import evaluate_detection  # noqa: E402
 from grfguard.faults import inject_faults  # noqa: E402
@@ -64,7 +64,7 @@ def scenario(g1, g1_vfs):
     faults = ["r1=frozen:0@5", f"r2=offset:{w:.2f}@5", f"r3=drift:{w:.2f}@5",
               f"r4=offset:{-w:.2f}@5"]
     faulty = inject_faults(g1_vfs, faults, seed=0)
-    res = Monitor.for_log(faulty, MonitorConfig()).run(faulty)
+    res = run_described(faulty, MonitorConfig(), g1)
     return res, evaluate_detection(res)
 
 

@@ -24,7 +24,13 @@ import pandas as pd
 from grfguard.errors import LogFormatError
 from grfguard.model.description import SIDES
 
-__all__ = ["described_robot", "is_described", "run_described", "with_described_vfs"]
+__all__ = [
+    "described_robot",
+    "described_thresholds",
+    "is_described",
+    "run_described",
+    "with_described_vfs",
+]
 
 
 def described_robot(df: pd.DataFrame, robot: Any = None) -> Any:
@@ -80,6 +86,20 @@ def with_described_vfs(df: pd.DataFrame, robot: Any = None, **kwargs: Any) -> pd
     return out
 
 
+def described_thresholds(name: str) -> Any:
+    """The shipped detector thresholds of robot ``name`` (``grfguard/data/<name>_thresholds
+    .toml``, made by ``benchmarks/calibrate_described_thresholds.py`` from fault-free walks
+    of that robot), or None when none are shipped."""
+    from importlib import resources
+
+    from grfguard.detect.thresholds import Thresholds
+
+    f = resources.files("grfguard") / "data" / f"{name}_thresholds.toml"
+    if not f.is_file():
+        return None
+    return Thresholds.from_toml_text(f.read_text())
+
+
 def is_described(df: pd.DataFrame) -> bool:
     """True when ``df``'s metadata names a described robot (``robot_name`` and
     ``sensing``; written by the whole-body simulation and by ``grfguard run --robot``)."""
@@ -90,7 +110,9 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd
     """The monitor over a log of a described robot.
 
     Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
-    then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path.
+    then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path, with the
+    robot's shipped thresholds (:func:`described_thresholds`) when ``config`` carries
+    the default ones (SURALP's).
 
     Args:
         df: The log.
@@ -101,17 +123,24 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd
     Raises:
         LogFormatError: The robot's sensing is not supported by the monitor.
     """
+    from grfguard.detect.config import MonitorConfig
     from grfguard.detect.detector import VFS_TOTAL_COLUMNS
     from grfguard.detect.monitor import Monitor
+    from grfguard.detect.thresholds import default_thresholds
     from grfguard.io.schema import vfs_col
     from grfguard.model.robot import SENSOR_NAMES
 
+    cfg = config if config is not None else MonitorConfig()
+    name = df.attrs.get("robot_name")
+    own = described_thresholds(str(name)) if isinstance(name, str) else None
+    if own is not None and cfg.thresholds == default_thresholds():
+        cfg = cfg.with_thresholds(own)
     sensing = df.attrs.get("sensing")
     if sensing == "corners":
         need = [vfs_col(s) for s in SENSOR_NAMES] + list(VFS_TOTAL_COLUMNS)
         if not all(c in df.columns for c in need):
             df = with_described_vfs(df, robot)
-        return Monitor.for_log(df, config).run(df)
+        return Monitor.for_log(df, cfg).run(df)
     raise LogFormatError(
         f"the monitor does not watch {sensing!r} sensing yet (robot "
         f"{df.attrs.get('robot_name')!r}); corner load cells ('corners') are supported")
