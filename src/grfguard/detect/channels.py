@@ -13,7 +13,8 @@ its own (batch, zero look-ahead except the planned contact timeline):
    away from every planned contact change (in double support the split of the load
    between the feet is only a model);
 2. **constant reading**: the same value for ``const_s`` seconds while the foot is
-   loaded (a healthy sensor's noise never repeats) -> ``frozen``;
+   loaded or the test valid (a healthy sensor's noise never repeats) -> ``frozen``
+   (also when the CUSUM flagged the channel first, at the jump to the frozen value);
 3. **two-sided CUSUM** (:func:`~grfguard.detect.blocks.cusum_step`) with allowance
    ``kappa`` [σ] and threshold ``h`` [σ·samples]; the onset is where the alarming sum
    last left zero;
@@ -48,7 +49,9 @@ class ChannelConfig:
     """Settings of :class:`ChannelMonitor`.
 
     Attributes:
-        sigma: Fault-free residual scale per channel (``ft_r_fz`` -> [N] or [N m]).
+        sigma: Fault-free residual scales per channel, ``(stance, swing)``
+            (``ft_r_fz`` -> [N], ``ft_r_tx`` -> [N m]): the virtual channel's model error
+            in stance is larger than the sensor noise that dominates in swing.
         h: CUSUM threshold [σ·samples] (one for every channel).
         kappa: CUSUM allowance [σ].
         guard_s: Tests pause this long around every planned contact change [s].
@@ -56,15 +59,16 @@ class ChannelConfig:
         source: Where the numbers come from.
     """
 
-    sigma: dict[str, float]
+    sigma: dict[str, tuple[float, float]]
     h: float = 30.0
-    kappa: float = 1.0
+    kappa: float = 2.0
     guard_s: float = 0.15
     const_s: float = 0.03
     source: str = "builtin"
 
     def __post_init__(self) -> None:
-        bad = {k: v for k, v in self.sigma.items() if not (v > 0 and math.isfinite(v))}
+        bad = {k: v for k, v in self.sigma.items()
+               if len(v) != 2 or not all(q > 0 and math.isfinite(q) for q in v)}
         if bad:
             raise ConfigError(f"channel sigma must be finite and > 0, got {bad}")
         if not (self.h > 0 and self.kappa >= 0 and self.guard_s >= 0 and self.const_s > 0):
@@ -102,6 +106,15 @@ def channel_valid_mask(log: pd.DataFrame, guard_s: float) -> np.ndarray:
     return np.column_stack([ok, ok])
 
 
+def _loaded(log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Planned stance per foot (right, left): ``contact_est``, else ``contact_ref``."""
+    out = []
+    for s in ("r", "l"):
+        c = f"contact_est_{s}" if f"contact_est_{s}" in log else f"contact_ref_{s}"
+        out.append(log[c].to_numpy(float) > 0.5)
+    return out[0], out[1]
+
+
 def _channels(log: pd.DataFrame) -> list[str]:
     chans = [c for c in log.columns if c.startswith("ft_") and f"vfs_{c[3:]}" in log]
     if not chans:
@@ -114,7 +127,8 @@ def calibrate_channels(logs: list[pd.DataFrame], rate_per_hour: float = 0.1,
                        safety: float = 1.5, base: ChannelConfig | None = None) -> ChannelConfig:
     """Residual scales and CUSUM threshold from fault-free logs with virtual channels.
 
-    ``sigma`` per channel is the robust scale of ``x - v`` on valid samples; ``h`` from
+    ``sigma`` per channel is the robust scale of ``x - v`` on valid samples, in stance and
+    in swing; ``h`` from
     the exponential tail of the fault-free CUSUM excursion peaks
     (:func:`~grfguard.detect.blocks.threshold_for_rate`), the rate split over the
     channels, never below ``safety`` x the largest peak nor ``base.h``.
@@ -124,28 +138,33 @@ def calibrate_channels(logs: list[pd.DataFrame], rate_per_hour: float = 0.1,
     chans = _channels(logs[0])
     guard = base.guard_s if base is not None else ChannelConfig({}).guard_s
     kappa = base.kappa if base is not None else ChannelConfig({}).kappa
-    res = {c: [] for c in chans}
-    masks = {c: [] for c in chans}
+    res: dict[str, list[np.ndarray]] = {c: [] for c in chans}
+    masks: dict[str, list[np.ndarray]] = {c: [] for c in chans}
+    stance: dict[str, list[np.ndarray]] = {c: [] for c in chans}
     hours = 0.0
     for log in logs:
         ok = channel_valid_mask(log, guard)
+        ld = _loaded(log)
         t = log["time"].to_numpy(float)
         hours += (t[-1] - t[0]) / 3600.0
         for c in chans:
             res[c].append(log[c].to_numpy(float) - log[f"vfs_{c[3:]}"].to_numpy(float))
             masks[c].append(ok[:, _side(c)])
-    sigma = {c: float(robust_scale(np.concatenate(res[c]), np.concatenate(masks[c])))
-             for c in chans}
+            stance[c].append(ld[_side(c)])
+    sigma = {}
+    for c in chans:
+        r, m, st = (np.concatenate(a) for a in (res[c], masks[c], stance[c]))
+        sigma[c] = (float(robust_scale(r, m & st)), float(robust_scale(r, m & ~st)))
     peaks = []
     for c in chans:
-        for r, m in zip(res[c], masks[c], strict=True):
+        for r, m, st in zip(res[c], masks[c], stance[c], strict=True):
             gp = gn = 0.0
             stat = np.zeros(r.size)
             for k in np.flatnonzero(m & np.isfinite(r)):
-                gp, gn = cusum_step(gp, gn, r[k] / sigma[c], kappa)
+                gp, gn = cusum_step(gp, gn, r[k] / sigma[c][0 if st[k] else 1], kappa)
                 stat[k] = max(gp, gn)
             peaks.append(excursion_peaks(stat))
-    floor = base.h if base is not None else 0.0
+    floor = base.h if base is not None else ChannelConfig({}).h
     h = threshold_for_rate(np.concatenate(peaks), hours * len(chans),
                            rate_per_hour / len(chans), safety, floor=floor)
     cfg = base if base is not None else ChannelConfig(sigma)
@@ -185,14 +204,15 @@ class ChannelMonitor:
         t = log["time"].to_numpy(float)
         ok = channel_valid_mask(log, cfg.guard_s)
         dt = float(np.median(np.diff(t)))
-        loaded = {s: log[f"contact_est_{s}"].to_numpy(float) > 0.5
-                  if f"contact_est_{s}" in log else np.ones(t.size, bool) for s in "rl"}
+        loaded = _loaded(log)
         out = log.copy()
         for c in chans:
             x = log[c].to_numpy(float)
             v = log[f"vfs_{c[3:]}"].to_numpy(float)
-            cols = self._channel(t, x, v, ok[:, _side(c)], loaded["rl"[_side(c)]],
-                                 cfg.sigma[c], max(2, int(round(cfg.const_s / dt))))
+            ld = loaded[_side(c)]
+            sig = np.where(ld, cfg.sigma[c][0], cfg.sigma[c][1])
+            cols = self._channel(t, x, v, ok[:, _side(c)], ld, sig,
+                                 max(2, int(round(cfg.const_s / dt))))
             for k, arr in cols.items():
                 out[f"{k}_{c}"] = arr
         out.attrs = {**log.attrs, "channel_monitor": {"h": cfg.h, "kappa": cfg.kappa,
@@ -200,7 +220,7 @@ class ChannelMonitor:
         return out
 
     def _channel(self, t: np.ndarray, x: np.ndarray, v: np.ndarray, ok: np.ndarray,
-                 loaded: np.ndarray, sigma: float, n_const: int) -> dict[str, Any]:
+                 loaded: np.ndarray, sigma: np.ndarray, n_const: int) -> dict[str, Any]:
         cfg = self.config
         n = t.size
         flag = np.zeros(n, bool)
@@ -220,13 +240,15 @@ class ChannelMonitor:
             else:
                 run = 1
             r = x[k] - v[k]
+            if onset is not None and not frozen and run >= n_const:
+                frozen = True  # flagged by the CUSUM first (a jump to the frozen value)
             if onset is None:
-                if loaded[k] and run >= n_const:
+                if (loaded[k] or ok[k]) and run >= n_const:
                     onset, frozen = k - run + 1, True
                 elif ok[k] and math.isfinite(r):
                     if gp == 0.0 and gn == 0.0:
                         start = k
-                    gp, gn = cusum_step(gp, gn, r / sigma, cfg.kappa)
+                    gp, gn = cusum_step(gp, gn, r / sigma[k], cfg.kappa)
                     if max(gp, gn) > cfg.h:
                         onset = start if start is not None else k
                         for j in range(onset, k + 1):  # the evidence so far
