@@ -1,5 +1,9 @@
 """Make the shipped thresholds of a described robot (src/grfguard/data/<robot>_thresholds.toml).
 
+Corner-cell robots (G1): thresholds of the default detector; ankle F/T robots (Talos):
+the per-channel scales and CUSUM threshold of :mod:`grfguard.detect.channels`
+(``<robot>_channels.toml``, :func:`~grfguard.detect.channels.calibrate_channels`).
+
 Fault-free walks of the robot on its scaled default gait
 (:func:`grfguard.sim.wholebody.scaled_gait`, default sensor noise) with calibration
 seeds 101-104, 60 s each (the tests and benchmarks use other seeds); the virtual sensor
@@ -15,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from grfguard.detect.calibrate import calibrate_thresholds
@@ -42,6 +47,20 @@ def main() -> None:
     logs = [with_described_vfs(simulate_robot(r, scaled_gait(r, duration=DURATION_S),
                                               NoiseConfig(), seed=s), r) for s in SEEDS]
     t1 = time.time()
+    if r.description.sensing == "ft":
+        from grfguard.detect.channels import calibrate_channels
+
+        cc = calibrate_channels(logs, RATE_PER_HOUR)
+        cc = replace(cc, source=f"benchmarks/calibrate_described_thresholds.py --robot "
+                     f"{args.robot}: seeds {list(SEEDS)}, {DURATION_S:g} s each")
+        print(cc.to_toml())
+        print(f"walks {t1 - t0:.1f} s, calibration {time.time() - t1:.1f} s")
+        if not args.dry_run:
+            out = DATA / f"{args.robot}_channels.toml"
+            out.write_text("# Made by benchmarks/calibrate_described_thresholds.py; do not "
+                           "edit.\n" + cc.to_toml())
+            print(f"wrote {out}")
+        return
     th = calibrate_thresholds(logs, RATE_PER_HOUR, MonitorConfig(thresholds=Thresholds()))
     th = th.replace(source=f"benchmarks/calibrate_described_thresholds.py --robot "
                     f"{args.robot}: scaled default gait, seeds {list(SEEDS)}, "

@@ -75,6 +75,33 @@ class ChannelConfig:
             raise ConfigError("channel h > 0, kappa >= 0, guard_s >= 0, const_s > 0 [s] needed")
 
 
+    def to_toml(self) -> str:
+        """TOML text of a ``[channels]`` table and a ``[channels.sigma]`` table."""
+        lines = ["[channels]", f"h = {self.h!r}", f"kappa = {self.kappa!r}",
+                 f"guard_s = {self.guard_s!r}", f"const_s = {self.const_s!r}",
+                 f"source = {self.source!r}".replace("'", '"'), "", "[channels.sigma]"]
+        lines += [f"{k} = [{v[0]!r}, {v[1]!r}]" for k, v in self.sigma.items()]
+        return "\n".join(lines) + "\n"
+
+    @classmethod
+    def from_toml_text(cls, text: str, where: str = "channel config") -> ChannelConfig:
+        """Parse :meth:`to_toml` output.
+
+        Raises:
+            ConfigError: Not TOML, or a missing/unknown key (named).
+        """
+        import tomllib
+
+        try:
+            doc = tomllib.loads(text)["channels"]
+            sigma = {k: (float(v[0]), float(v[1])) for k, v in doc.pop("sigma").items()}
+            return cls(sigma=sigma, **doc)
+        except (tomllib.TOMLDecodeError, KeyError, TypeError, IndexError) as exc:
+            raise ConfigError(f"{where}: expected a [channels] table with h, kappa, guard_s, "
+                              f"const_s, source and [channels.sigma] ch = [stance, swing]: "
+                              f"{exc}") from exc
+
+
 def _side(ch: str) -> int:
     return 0 if ch.startswith("ft_r_") else 1
 

@@ -17,6 +17,7 @@ Example:
 
 from __future__ import annotations
 
+from importlib import resources
 from typing import Any
 
 import pandas as pd
@@ -90,8 +91,6 @@ def described_thresholds(name: str) -> Any:
     """The shipped detector thresholds of robot ``name`` (``grfguard/data/<name>_thresholds
     .toml``, made by ``benchmarks/calibrate_described_thresholds.py`` from fault-free walks
     of that robot), or None when none are shipped."""
-    from importlib import resources
-
     from grfguard.detect.thresholds import Thresholds
 
     f = resources.files("grfguard") / "data" / f"{name}_thresholds.toml"
@@ -108,6 +107,10 @@ def is_described(df: pd.DataFrame) -> bool:
 
 def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd.DataFrame:
     """The monitor over a log of a described robot.
+
+    Ankle F/T sensors: :class:`~grfguard.detect.channels.ChannelMonitor` with the robot's
+    shipped channel thresholds (``grfguard/data/<name>_channels.toml``) on the
+    virtual channels (``config`` is not used).
 
     Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
     then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path, with the
@@ -141,6 +144,18 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd
         if not all(c in df.columns for c in need):
             df = with_described_vfs(df, robot)
         return Monitor.for_log(df, cfg).run(df)
+    if sensing == "ft":
+        from grfguard.detect.channels import ChannelConfig, ChannelMonitor
+
+        f = resources.files("grfguard") / "data" / f"{name}_channels.toml"
+        if not f.is_file():
+            raise LogFormatError(
+                f"no channel thresholds shipped for F/T robot {name!r}; calibrate them "
+                "with grfguard.detect.channels.calibrate_channels on fault-free logs and "
+                "run ChannelMonitor(config).run(with_described_vfs(log))")
+        if not all(f"vfs_{c[3:]}" in df for c in df.columns if c.startswith("ft_")):
+            df = with_described_vfs(df, robot)
+        return ChannelMonitor(ChannelConfig.from_toml_text(f.read_text(), str(f))).run(df)
     raise LogFormatError(
-        f"the monitor does not watch {sensing!r} sensing yet (robot "
-        f"{df.attrs.get('robot_name')!r}); corner load cells ('corners') are supported")
+        f"the monitor does not watch {sensing!r} sensing (robot {name!r}); 'corners' and "
+        "'ft' are supported")
