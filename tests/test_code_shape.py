@@ -20,8 +20,6 @@ MAX_LINES = 80
 #: ``"path/relative/to/grfguard.py::function"`` -> reason it may stay long. Keep short.
 EXCEPTIONS: dict[str, str] = {
     "estimate/wrench.py::estimate_wrenches": "owned by the estimate helper (issue 8)",
-    "report/html.py::sensor_figure_specs": "not split yet",
-    "report/html.py::overview_figure_specs": "not split yet",
 }
 
 #: Layers the stages must never import.
