@@ -577,7 +577,8 @@ def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
     )
 
 
-_CSS = """
+#: Page style shared by the HTML reports (this one and the campaign report).
+BASE_CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0;color:#222;
 background:#fafafa}
 header{background:#1f2d3d;color:#fff;padding:14px 24px}
@@ -588,7 +589,9 @@ h2{font-size:16px;margin:22px 0 8px}
 table{border-collapse:collapse;font-size:13px;background:#fff}
 th,td{border:1px solid #ddd;padding:4px 8px;text-align:right;vertical-align:top}
 th{background:#f0f2f5}
-table.meta th,table.meta td{text-align:left}
+"""
+
+_CSS = BASE_CSS + """table.meta th,table.meta td{text-align:left}
 table.meta{width:100%}
 table.meta th{width:150px}
 .kvs{display:flex;flex-wrap:wrap;gap:2px 14px}
