@@ -244,6 +244,8 @@ def run(
         from grfguard.io.robot_schema import load_robot_log
 
         df = load_robot_log(log, robot)
+        df.attrs.setdefault("robot_name", robot)
+        df.attrs.setdefault("sensing", rob.sensing)
     else:
         df = read_any(log, topics_map, time_order=time_order)
     robot_for_log(df, rob, str(log))
@@ -297,6 +299,10 @@ def _run_monitor(
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
+    from grfguard.estimate.described import is_described, run_described
+
+    if is_described(df):  # Talos, G1, a robot TOML: the batch wrench estimator (issue 9)
+        return run_described(df, cfg)
     if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
         from grfguard.cli_calib import corrected_log
 

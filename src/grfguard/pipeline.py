@@ -19,8 +19,9 @@ Three stages, each its own module, wired here (the only module that knows all th
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -28,27 +29,73 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector, DetectorInputs
 from grfguard.detect.paper import PaperDetector
+from grfguard.detect.system import CommonModeConfig, CommonModeMonitor
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
+from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
 from grfguard.io.schema import TIME, force_col, vfs_col
-from grfguard.model.robot import SENSOR_NAMES, SIDES
+from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
 from grfguard.recover.recovery import RecoverTuning, Recovery
 
 __all__ = ["Monitor"]
 
 _NAN = float("nan")
+_REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
+_KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
+_FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 
 
 def _f(row: Mapping[str, Any], key: str) -> float:
     """``row[key]`` as a float; NaN when missing or not a number."""
     try:
         return float(row[key])
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError, ValueError, OverflowError):
         return _NAN
+
+
+def _robot_by_mass(log: pd.DataFrame) -> RobotConfig:
+    """A stand-in robot with the log's mass (``attrs["robot"]["mass"]`` or
+    ``["nominal"]["mass"]``) for the physical ranges; SURALP's when none is found."""
+    r = (getattr(log, "attrs", {}) or {}).get("robot")
+    for d in (r, r.get("nominal") if isinstance(r, Mapping) else None):
+        if isinstance(d, Mapping):
+            try:
+                m = float(d["mass"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if math.isfinite(m) and m > 0:
+                return RobotConfig(mass=m)
+    return RobotConfig()
+
+
+class _Prepared(NamedTuple):
+    """One sample after the guards: the detector's arguments and the system state."""
+
+    clock: float
+    x: list[float]
+    v: list[float]
+    tot: list[float]
+    cref: list[float]
+    cest: list[float]
+    implausible: list[bool]
+    state: str
+    reason: str
 
 
 class Monitor:
     """Virtual force sensor + fault detection, isolation, classification and recovery.
+
+    Per sample, before the detector: the input guard (:class:`~grfguard.guard.InputGuard`)
+    turns values outside the robot's physical range into NaN (an IMU or encoder glitch
+    is skipped by the VFS like a dropout, a force reading out of range is a fault at
+    once, kind ``spikes``); the time guard (:class:`~grfguard.guard.TimeGuard`) finds
+    gaps and stamps that do not move forward; after such a break or after samples the
+    VFS could not use, the VFS is reset and its outputs wait ``guard.settle_s`` before
+    the tests use them again (the tests never compare a sensor with a held estimate).
+    ``recovered_<s>`` is kept within the plausible force range. The ``system_state``
+    (``ok``, ``time_gap``, ``time_backwards``, ``time_constant``, ``time_missing``,
+    ``input_invalid``, ``settling``) and ``system_reason`` outputs report all this; none
+    of it flags a sensor by itself.
 
     Args:
         config: Settings (method, thresholds, gates).
@@ -56,6 +103,9 @@ class Monitor:
             carries the VFS outputs (``vfs_<s>``, ``vfs_total_<side>``).
         detect_tuning: Design constants of the default detector.
         recover_tuning: Design constants of the recovery.
+        guard: Settings of the input and time guards.
+        robot: Robot description for the physical ranges (default: the VFS's robot, or
+            SURALP).
 
     Example:
         >>> mon = Monitor.for_log(log)
@@ -69,18 +119,37 @@ class Monitor:
         vfs: Any = None,
         detect_tuning: DetectTuning | None = None,
         recover_tuning: RecoverTuning | None = None,
+        guard: GuardConfig | None = None,
+        robot: RobotConfig | None = None,
+        common_mode: CommonModeConfig | bool = False,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
+        self.guard = guard if guard is not None else GuardConfig()
+        if robot is None:
+            robot = getattr(vfs, "robot", None) or RobotConfig()
+        self.robot = robot
         self.detector = Detector(self.config, detect_tuning)
         self.paper = PaperDetector(self.config)
         self.recovery = Recovery(self.config, recover_tuning)
+        self.inputs = InputGuard(robot, self.guard)
+        self.time_guard = TimeGuard(self.config.dt_s, self.guard)
+        self.continuity = Continuity(self.guard.settle_s)
+        self.common: CommonModeMonitor | None = None
+        if common_mode is not False:
+            cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
+            self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
         self.reset()
 
     @classmethod
-    def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None) -> Monitor:
+    def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
+                guard: GuardConfig | None = None,
+                common_mode: CommonModeConfig | bool = False) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
-        ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``."""
+        ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
+        the robot (physical ranges) from ``log.attrs``."""
+        from grfguard.calib.selfcal import robot_of
+
         cfg = config_for_log(log, config)
         has_vfs = all(vfs_col(s) in log.columns for s in SENSOR_NAMES) and all(
             c in log.columns for c in VFS_TOTAL_COLUMNS
@@ -90,7 +159,11 @@ class Monitor:
             from grfguard.estimate.vfs import VirtualForceSensor
 
             vfs = VirtualForceSensor.for_log(log, cfg.vfs)
-        return cls(cfg, vfs)
+        try:
+            robot = robot_of(log)
+        except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
+            robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
+        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode)
 
     @property
     def sensors(self) -> list[Any]:
@@ -98,12 +171,17 @@ class Monitor:
         return self.detector.sensors
 
     def reset(self) -> None:
-        """Forget everything (filters, flags, contact timeline, VFS state)."""
+        """Forget everything (filters, flags, contact timeline, VFS state, guards)."""
         if self.vfs is not None:
             self.vfs.reset()
         self.detector.reset()
         self.paper.reset()
         self.recovery.reset()
+        self.time_guard.reset()
+        self.continuity.reset()
+        if self.common is not None:
+            self.common.reset()
+        self._spike = [False] * len(SENSOR_NAMES)
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
         if self.vfs is not None:
@@ -112,6 +190,37 @@ class Monitor:
             except Exception:  # noqa: BLE001 - a bad sample must never raise
                 return {}
         return {}
+
+    # ------------------------------------------------------------------ stages
+    def _prepare(
+        self, t_raw: float, clock: float, tstate: str, jump: float, reason: str,
+        reset: bool, valid: bool, x_raw: list[float], x: list[float], v: list[float],
+        tot: list[float], cref: list[float], cest: list[float],
+    ) -> _Prepared:
+        """The guards' verdict on one sample (shared by ``update`` and ``run``)."""
+        lo, hi = self.inputs.force_lo, self.inputs.force_hi
+        bounded = all(math.isnan(q) or lo <= q <= hi for q in v) and all(
+            math.isnan(q) or 2 * lo <= q <= 2 * hi for q in tot)
+        use = self.continuity.after(clock, reset, valid) and bounded
+        if not use:
+            v = [_NAN] * len(v)
+            tot = [_NAN, _NAN]
+            cest = [_NAN, _NAN]
+        implausible = [self.inputs.force_implausible(q) for q in x_raw]
+        if tstate != "ok":
+            state = tstate
+            reason = (f"time stamp {t_raw:.6g} s: step {jump:+.6g} s" if math.isfinite(jump)
+                      else "time stamp missing") + (f"; {reason}" if reason else "")
+        elif not (valid and bounded):
+            state = "input_invalid"
+            reason = reason or ("estimator inputs missing or not finite" if not valid
+                                else "virtual forces outside the physical range")
+        elif not use:
+            state = "settling"
+            reason = reason or "virtual sensor settling after a break"
+        else:
+            state = "ok"
+        return _Prepared(clock, x, v, tot, cref, cest, implausible, state, reason)
 
     def _step(self, t: float, x: list[float], v: list[float], tot: list[float],
               cref: list[float], cest: list[float]) -> dict[str, Any]:
@@ -124,33 +233,164 @@ class Monitor:
             out.update(det.diagnostics)
         return out
 
+    def _detect(self, p: _Prepared) -> dict[str, Any]:
+        """Detector and recovery on a prepared sample; a time gap first resets the
+        contact timeline (lift-off and touch-down times, swing durations measured across
+        the gap would be wrong)."""
+        if p.state == "time_gap":
+            self.detector.timeline.reset()
+        if self.common is None or self.config.method == "paper":
+            return self._step(p.clock, p.x, p.v, p.tot, p.cref, p.cest)
+        valid = [(ce > 0.5) if math.isfinite(ce) else (cr > 0.5)
+                 for ce, cr in zip(p.cest, p.cref, strict=True)]
+        if not all(math.isfinite(q) for q in p.v):
+            valid = [False, False]
+        frozen = any(s.flag for s in self.detector.sensors)
+        cm = self.common.update(p.x, p.v, valid, frozen=frozen)
+        v, tot = p.v, p.tot
+        if cm.model_mismatch:
+            corr = [float(c) for c in cm.correction_n]
+            v = [a + c for a, c in zip(v, corr, strict=True)]
+            tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
+        out = self._step(p.clock, p.x, v, tot, p.cref, p.cest)
+        out["model_mismatch"] = cm.model_mismatch
+        out["model_mismatch_reason"] = cm.reason
+        return out
+
+    def _finish(self, res: dict[str, Any], p: _Prepared) -> dict[str, Any]:
+        """Kinds of out-of-range readings, recovered force within range, system state."""
+        for i in range(len(SENSOR_NAMES)):
+            flagged = bool(res.get(_FLAG_COLS[i], False))
+            if p.implausible[i]:
+                self._spike[i] = True
+            elif not flagged:
+                self._spike[i] = False
+            if self._spike[i] and flagged and _KIND_COLS[i] in res:
+                res[_KIND_COLS[i]] = "spikes"
+            rc = _REC_COLS[i]
+            if rc in res:
+                res[rc] = self.inputs.clamp(float(res[rc]))
+        res["system_state"] = p.state
+        res["system_reason"] = p.reason
+        return res
+
+    # ------------------------------------------------------------------ streaming
     def update(self, row: Mapping[str, Any]) -> dict[str, Any]:
-        """Process one sample; never raises on a bad sample (NaN or missing keys are
-        flagged as dropouts or skipped).
+        """Process one sample; never raises on a bad sample (NaN, out-of-range values or
+        missing keys are rejected, flagged as dropouts or skipped).
 
         Args:
             row: Mapping with the log-contract columns of one sample.
 
         Returns:
             Dict with the VFS outputs and ``flag_<s>``, ``kind_<s>``, ``eta_<s>``,
-            ``recovered_<s>`` for every sensor.
+            ``recovered_<s>`` for every sensor, ``system_state`` and ``system_reason``.
         """
-        vout = self._vfs_row(row)
-        src = vout if self.vfs is not None else row
-        res = self._step(
-            _f(row, TIME),
+        if not isinstance(row, Mapping):
+            row = {}
+        t_raw = _f(row, TIME)
+        clean, reason = self.inputs.clean_row(row)
+        clock, tstate, jump = self.time_guard.step(t_raw)
+        reset = self.continuity.before(tstate)
+        if reset and self.vfs is not None:
+            if self._can_resync():
+                self._vfs_resync()
+            else:
+                self.vfs.reset()
+        vout = self._vfs_row(clean)
+        src = vout if self.vfs is not None else clean
+        v = [_f(src, vfs_col(s)) for s in SENSOR_NAMES]
+        tot = [_f(src, c) for c in VFS_TOTAL_COLUMNS]
+        valid = self._valid(_f(src, "vfs_valid"), v, tot)
+        p = self._prepare(
+            t_raw, clock, tstate, jump, reason, reset, valid,
             [_f(row, force_col(s)) for s in SENSOR_NAMES],
-            [_f(src, vfs_col(s)) for s in SENSOR_NAMES],
-            [_f(src, c) for c in VFS_TOTAL_COLUMNS],
+            [_f(clean, force_col(s)) for s in SENSOR_NAMES],
+            v, tot,
             [_f(row, f"contact_ref_{s}") for s in SIDES],
             [_f(src, f"contact_est_{s}") for s in SIDES],
         )
+        res = self._finish(self._detect(p), p)
         out: dict[str, Any] = dict(vout)
         out.update(res)
         return out
 
+    def _valid(self, flag: float, v: list[float], tot: list[float]) -> bool:
+        """The VFS output of this sample is usable (its ``vfs_valid``; without that
+        column: every virtual force finite)."""
+        if self.vfs is not None or math.isfinite(flag):
+            return flag == 1.0
+        return all(math.isfinite(q) for q in v) and all(math.isfinite(q) for q in tot)
+
+    # ------------------------------------------------------------------ batch
+    def _can_resync(self) -> bool:
+        """The VFS runs the Python stages (a compiled sensor is reset instead)."""
+        return not getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "_hist")
+
+    def _vfs_resync(self) -> None:
+        """Forget the VFS's finite-difference history (a continuity break): the next two
+        samples have no rate; filters, attitude and odometry keep their state."""
+        v = self.vfs
+        v._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
+        v._prev_frames = None
+        v._prev_L = None
+
+    def _vfs_batch(self, clean: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
+        """The VFS over the log, resynced where the streaming monitor resyncs it (the
+        stages of ``VirtualForceSensor.run`` per continuous segment)."""
+        from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
+
+        vfs = self.vfs
+        assert vfs is not None
+        vfs.reset()
+        n = len(clean)
+        inp = vfs._inputs(clean)
+        valid = inp.valid()
+        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
+        result["vfs_valid"] = valid.astype(float)
+        starts = sorted({0, *np.flatnonzero(resync).tolist(), n})
+        outs: dict[str, list[np.ndarray]] = {}
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            idx = a + np.flatnonzero(valid[a:b])
+            if a > 0 and resync[a]:
+                self._vfs_resync()
+            if idx.size:
+                for k, val in vfs._process(inp.take(idx)).items():
+                    outs.setdefault(k, []).append(np.asarray(val, float))
+        if outs:
+            pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
+            has = pos >= 0
+            for k, parts in outs.items():
+                v = np.concatenate(parts)
+                col = np.full(n, np.nan)
+                col[has] = v[pos[has]]
+                result[k] = col
+        vfs.reset()
+        return pd.DataFrame(result, index=clean.index)
+
+    def _vfs_reset_segments(self, clean: pd.DataFrame, resets: np.ndarray) -> pd.DataFrame:
+        """The VFS over the log, reset (not resynced) at every break."""
+        from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
+
+        assert self.vfs is not None
+        n = len(clean)
+        valid = self.vfs._inputs(clean).valid()
+        starts = sorted({0, *np.flatnonzero(resets).tolist(), n})
+        parts = []
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            seg = clean.iloc[a:b]
+            if valid[a:b].any():
+                parts.append(self.vfs.run(seg))
+            else:  # a reset VFS holds nothing
+                blank = pd.DataFrame(np.nan, index=seg.index, columns=list(VFS_OUTPUT_COLUMNS))
+                blank["vfs_valid"] = 0.0
+                parts.append(blank)
+        self.vfs.reset()
+        return pd.concat(parts)
+
     def run(self, log: pd.DataFrame) -> pd.DataFrame:
-        """Reset, then process the whole log; returns ``log`` plus the output columns.
+        """Reset, then process the whole log; returns ``log`` plus the output columns
+        (the same numbers as :meth:`update` row by row).
 
         Raises:
             LogFormatError: If ``time`` or a ``force_<s>`` column is missing.
@@ -161,19 +401,51 @@ class Monitor:
                 f"Monitor.run: the log lacks column(s) {missing}; see grfguard.io.schema"
             )
         self.reset()
+        n = len(log)
+        clean, reasons = self.inputs.clean_frame(log)
+        t_raw = pd.to_numeric(log[TIME], errors="coerce").to_numpy(dtype=float).tolist()
+        times = [self.time_guard.step(t) for t in t_raw]
+        resets = np.zeros(n, dtype=bool)
         vdf = None
         if self.vfs is not None:
-            vdf = self.vfs.run(log)
-            self.vfs.reset()
-        inp = DetectorInputs.from_frames(log, vdf if vdf is not None else log)
+            self.vfs._check_columns(log.columns)
+            valid_in = self.vfs._inputs(clean).valid() if n else np.zeros(0, bool)
+            for k in range(1, n):
+                resets[k] = times[k][1] == "time_gap" or not valid_in[k - 1]
+            if not resets.any():
+                vdf = self.vfs.run(clean)
+                self.vfs.reset()
+            elif self._can_resync():
+                vdf = self._vfs_batch(clean, resets)
+            else:
+                vdf = self._vfs_reset_segments(clean, resets)
+        inp = DetectorInputs.from_frames(clean, vdf if vdf is not None else clean)
+        x_raw = [pd.to_numeric(log[force_col(s)], errors="coerce").to_numpy(float).tolist()
+                 for s in SENSOR_NAMES]
+        src = vdf if vdf is not None else clean
+        flag = (src["vfs_valid"].to_numpy(dtype=float).tolist() if "vfs_valid" in src
+                else [_NAN] * n)
+        prepared = []
+        for k in range(n):
+            t, x, v, tot, cref, cest = inp.sample(k)
+            clock, tstate, jump = times[k]
+            if self.vfs is None:
+                resets[k] = self.continuity.before(tstate)
+            else:
+                self.continuity.before(tstate)
+            prepared.append(self._prepare(
+                t_raw[k], clock, tstate, jump, reasons[k], bool(resets[k]),
+                self._valid(flag[k], v, tot), [c[k] for c in x_raw], x, v, tot, cref, cest))
         if self.config.method == "paper":
-            res = pd.DataFrame(
-                self.paper.run(np.array(inp.t), np.array(inp.x).T, np.array(inp.v).T),
-                index=log.index,
-            )
+            pres = self.paper.run(
+                np.array([p.clock for p in prepared]), np.array([p.x for p in prepared]),
+                np.array([p.v for p in prepared]))
+            cols = list(pres)
+            rows = [{c: pres[c][k] for c in cols} for k in range(n)]
         else:
-            rows = [self._step(*inp.sample(k)) for k in range(len(log))]
-            res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)
+            rows = [self._detect(p) for p in prepared]
+        rows = [self._finish(r, p) for r, p in zip(rows, prepared, strict=True)]
+        res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)
         out = log.copy()
         if vdf is not None:
             for c in vdf.columns:

@@ -65,11 +65,14 @@ class WrenchEstimate:
             force [N], torque [N m] (right, left).
         sensor: The log's force channels estimated: ``ft_<s>_<axis>`` (sensor frame,
             foot on leg) or ``force_<s><k>`` (corner cells, [N]) -> (T,) arrays.
+        contact: (T, 2) bool, the feet taken as in stance (planned contact, or the
+            lower sole), right then left.
     """
 
     time: np.ndarray
     ground: np.ndarray
     sensor: dict[str, np.ndarray]
+    contact: np.ndarray | None = None
 
 
 def wrench_columns(est: WrenchEstimate) -> pd.DataFrame:
@@ -82,6 +85,218 @@ def wrench_columns(est: WrenchEstimate) -> pd.DataFrame:
 
 def _deriv(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
     return savgol_filter(x, win, 3, deriv=order, delta=dt, axis=0, mode="interp")
+
+
+def _win(seconds: float, dt: float, n: int) -> int:
+    """Odd Savitzky-Golay window of ``seconds`` (at least 5 samples, at most ``n``)."""
+    win = max(5, int(round(seconds / dt)) | 1)
+    if win > n:
+        win = n if n % 2 else n - 1
+    return win
+
+
+@dataclass(frozen=True)
+class _Signals:
+    """The log's inputs, smoothed: time, joints and derivatives, IMU attitude and gyro."""
+
+    t: np.ndarray
+    dt: float
+    win: int
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    R_WI: np.ndarray
+    gyro_I: np.ndarray
+
+
+def _signals(df: pd.DataFrame, robot: LoadedRobot, window: float) -> _Signals:
+    """Stage 1: check the joint columns, smooth and differentiate the inputs."""
+    missing = [f"q_{j}" for j in robot.joint_names if f"q_{j}" not in df.columns]
+    if missing:
+        raise LogFormatError(f"log misses joint column(s) {missing} of robot "
+                             f"{robot.description.name!r}")
+    t = df["time"].to_numpy(float)
+    dt = float(np.median(np.diff(t)))
+    win = _win(window, dt, t.size)
+    q = df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float)
+    # attitude and rates smoothed over the same window (white attitude noise would
+    # otherwise be differentiated twice through the sole positions)
+    quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
+    quat_I = quat_I * np.where(quat_I[:, :1] < 0, -1.0, 1.0)
+    quat_I = _deriv(quat_I, win, 0, dt)
+    R_WI = quat_to_rotation(quat_I / np.linalg.norm(quat_I, axis=1, keepdims=True))
+    gyro_I = _deriv(df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float), win, 0, dt)
+    return _Signals(t, dt, win, q, _deriv(q, win, 1, dt), _deriv(q, win, 2, dt), R_WI, gyro_I)
+
+
+def _body_frames(robot: LoadedRobot, d: mujoco.MjData, sig: _Signals):
+    """Stage 2 (pass 1): base attitude from the IMU, IMU and soles in base axes.
+
+    Returns ``(R_WB, R_BI, p_rel, R_BS, p_imu)``: (T,3,3), (T,3,3), (2,T,3), (2,T,3,3),
+    (T,3)."""
+    m = robot.model
+    n = sig.t.size
+    jq = robot.qpos_adr(robot.joint_names)
+    imu = m.site("imu").id
+    sites = [m.site(f"{s}_sole").id for s in SIDES]
+    qpos = m.qpos0.copy()
+    qpos[:3] = 0.0
+    R_WB = np.empty((n, 3, 3))
+    R_BI = np.empty((n, 3, 3))
+    p_rel = np.empty((2, n, 3))
+    R_BS = np.empty((2, n, 3, 3))
+    p_imu = np.empty((n, 3))
+    for k in range(n):
+        qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+        qpos[jq] = sig.q[k]
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        R_BI[k] = d.site_xmat[imu].reshape(3, 3)  # IMU in base axes (base at identity)
+        p_imu[k] = d.site_xpos[imu]
+        R_WB[k] = sig.R_WI[k] @ R_BI[k].T
+        for i, sid in enumerate(sites):
+            p_rel[i, k] = d.site_xpos[sid]  # sole in base axes (encoders only)
+            R_BS[i, k] = d.site_xmat[sid].reshape(3, 3)
+    return R_WB, R_BI, p_rel, R_BS, p_imu
+
+
+def _stance_weights(df: pd.DataFrame, R_WB: np.ndarray, p_rel: np.ndarray) -> np.ndarray:
+    """Stage 3: (T, 2) planned stance weights (``contact_ref_r/l``, else the lower sole)."""
+    if {"contact_ref_r", "contact_ref_l"} <= set(df.columns):
+        c = df[["contact_ref_r", "contact_ref_l"]].to_numpy(float)
+    else:
+        z = np.einsum("tj,itj->it", R_WB[:, 2, :], p_rel)  # sole heights below the base
+        c = np.column_stack([z[0] <= z[1], z[1] < z[0]]).astype(float)
+    return c / np.maximum(c.sum(axis=1, keepdims=True), 1.0)
+
+
+def _attitude(attitude: str, R_WB: np.ndarray, R_BS: np.ndarray, w: np.ndarray,
+              dt: float, level_window: float) -> np.ndarray:
+    """Stage 4: the base attitude (T, 3, 3) the ``attitude`` option asks for."""
+    n = w.shape[0]
+    if attitude == "stance":
+        # roll and pitch from the stance sole lying flat (encoders), yaw from the IMU:
+        # an IMU attitude error of 0.1 deg would shift the CoM over a 1 m tall robot's
+        # foot by 2 mm, 1 % of the ankle torque of a 20 cm foot
+        st = np.argmax(w, axis=1)
+        R_S = R_BS[st, np.arange(n)]  # stance sole in base axes
+        R_WS = R_WB @ R_S
+        yaw = np.arctan2(R_WS[:, 1, 0], R_WS[:, 0, 0])
+        Rz = np.zeros((n, 3, 3))
+        Rz[:, 0, 0], Rz[:, 0, 1] = np.cos(yaw), -np.sin(yaw)
+        Rz[:, 1, 0], Rz[:, 1, 1] = np.sin(yaw), np.cos(yaw)
+        Rz[:, 2, 2] = 1.0
+        return Rz @ np.swapaxes(R_S, 1, 2)
+    if attitude == "leveled":
+        # the IMU's attitude with its slow roll/pitch error removed: the mean over
+        # ``level_window`` of the tilt between it and the stance sole lying flat (the
+        # sole's own rocking alternates from step to step and averages out)
+        st = np.argmax(w, axis=1)
+        R_kin = np.swapaxes(R_BS[st, np.arange(n)], 1, 2)  # base in a flat-sole frame
+        D = R_WB @ np.swapaxes(R_kin, 1, 2)  # IMU-based sole attitude (yaw + tilt error)
+        tilt = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0]], axis=1)
+        k_lv = max(1, int(round(level_window / dt)))
+        tilt = uniform_filter1d(tilt, min(k_lv, n), axis=0, mode="nearest")
+        corr = np.column_stack([-tilt, np.zeros(n)])
+        return _small_rotations(corr) @ R_WB
+    if attitude != "imu":
+        raise ValueError(f"attitude must be 'imu', 'leveled' or 'stance', got {attitude!r}")
+    return R_WB
+
+
+def _base_motion(df: pd.DataFrame, robot: LoadedRobot, sig: _Signals, R_WB: np.ndarray,
+                 p_rel: np.ndarray, p_imu: np.ndarray, w: np.ndarray, omega_B: np.ndarray,
+                 alpha_B: np.ndarray, blend: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 5: base velocity and acceleration (T, 3) each, world axes [m/s, m/s^2]."""
+    n, win, dt = sig.t.size, sig.win, sig.dt
+    # stance sole still: v_B = -R (w x p + p'), a_B = -R (w x (w x p) + 2 w x p' + a x p + p'')
+    # (base axes; attitude noise is never differentiated)
+    v_loc = np.zeros((n, 3))
+    a_loc = np.zeros((n, 3))
+    for i in range(2):
+        p, pd_, pdd = p_rel[i], _deriv(p_rel[i], win, 1, dt), _deriv(p_rel[i], win, 2, dt)
+        v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
+        a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
+                                  + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
+    v_B = -np.einsum("tij,tj->ti", R_WB, v_loc)
+    a_B = -np.einsum("tij,tj->ti", R_WB, a_loc)
+    if blend is not None and {"imu_acc_x", "imu_acc_y", "imu_acc_z"} <= set(df.columns):
+        # complementary blend: the accelerometer (lever arm of the IMU removed) with its
+        # slow errors (bias, gravity leaking through an attitude error) replaced by the
+        # odometry's, whose own error (encoder quantization differentiated twice) is fast
+        f_I = df[["imu_acc_x", "imu_acc_y", "imu_acc_z"]].to_numpy(float)
+        r_B = p_imu - 0.0  # IMU position in base axes (base origin at 0)
+        a_imu = np.einsum("tij,tj->ti", sig.R_WI, f_I)
+        a_imu[:, 2] += float(robot.model.opt.gravity[2])
+        lever = (np.cross(alpha_B, r_B) + np.cross(omega_B, np.cross(omega_B, r_B)))
+        a_acc = _deriv(a_imu - np.einsum("tij,tj->ti", R_WB, lever), win, 0, dt)
+        a_B = a_acc + _deriv(a_B - a_acc, _win(blend, dt, n), 0, dt)
+    return v_B, a_B
+
+
+def _ft_readings(robot: LoadedRobot, d: mujoco.MjData, ground_k: np.ndarray,
+                 out_k: np.ndarray) -> None:
+    """Ankle F/T readings (2, 6) of one sample into ``out_k``: the ground wrench applied
+    to each foot body, the internal wrench to its parent read at the sensor frame."""
+    m = robot.model
+    feet_b = [m.body(f.body).id for f in robot.description.feet]
+    sites = [m.site(f"{s}_sole").id for s in SIDES]
+    ft_sites = [m.site(f"{s}_ft").id for s in SIDES]
+    d.xfrc_applied[:] = 0.0
+    for i, b in enumerate(feet_b):
+        F, tau = ground_k[i, :3], ground_k[i, 3:]
+        d.xfrc_applied[b, :3] = F
+        d.xfrc_applied[b, 3:] = tau + np.cross(d.site_xpos[sites[i]] - d.xipos[b], F)
+    mujoco.mj_rnePostConstraint(m, d)
+    for i, b in enumerate(feet_b):
+        tq, fo = d.cfrc_int[b, :3], d.cfrc_int[b, 3:]
+        p_site = d.site_xpos[ft_sites[i]]
+        tq_site = tq - np.cross(p_site - d.subtree_com[m.body_rootid[b]], fo)
+        R = d.site_xmat[ft_sites[i]].reshape(3, 3)
+        out_k[i, :3] = -(R.T @ fo)
+        out_k[i, 3:] = -(R.T @ tq_site)
+
+
+def _inverse_dynamics(robot: LoadedRobot, d: mujoco.MjData, sig: _Signals,
+                      quat_B: np.ndarray, v_B: np.ndarray, omega_B: np.ndarray,
+                      a_B: np.ndarray, alpha_B: np.ndarray,
+                      w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 6 (pass 2): ground wrench per foot at its sole (2, T, 6) and, for ankle F/T
+    sensing, the sensor readings (2, T, 6) (zeros otherwise)."""
+    m = robot.model
+    n = sig.t.size
+    jq = robot.qpos_adr(robot.joint_names)
+    jv = robot.dof_adr(robot.joint_names)
+    sites = [m.site(f"{s}_sole").id for s in SIDES]
+    ft = robot.description.sensing == "ft"
+    ground = np.zeros((2, n, 6))
+    ft_out = np.zeros((2, n, 6))
+    jac = np.zeros((6, m.nv))
+    f_rne = np.zeros(m.nv)
+    try:
+        for k in range(n):
+            d.qpos[:3] = 0.0
+            d.qpos[3:7] = quat_B[k]
+            d.qpos[jq] = sig.q[k]
+            d.qvel[:3], d.qvel[3:6], d.qvel[jv] = v_B[k], omega_B[k], sig.qd[k]
+            d.qacc[:3], d.qacc[3:6], d.qacc[jv] = a_B[k], alpha_B[k], sig.qdd[k]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            mujoco.mj_comVel(m, d)
+            mujoco.mj_rne(m, d, 1, f_rne)  # M qdd + c (the free rows have no armature)
+            f_free = f_rne[:6].copy()
+            alone = np.empty((2, 6))
+            for i, sid in enumerate(sites):
+                mujoco.mj_jacSite(m, d, jac[:3], jac[3:], sid)
+                alone[i] = np.linalg.solve(jac[:, :6].T, f_free)
+            share = _share(w[k], alone, d.site_xpos[sites[0]], d.site_xpos[sites[1]])
+            for i in range(2):
+                ground[i, k] = share[i] * alone[i]
+            if ft:
+                _ft_readings(robot, d, ground[:, k], ft_out[:, k])
+    finally:
+        d.xfrc_applied[:] = 0.0
+    return ground, ft_out
 
 
 def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
@@ -109,162 +324,20 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
     Raises:
         LogFormatError: A joint column is missing.
     """
-    m = robot.model
-    d = mujoco.MjData(m)
-    missing = [f"q_{j}" for j in robot.joint_names if f"q_{j}" not in df.columns]
-    if missing:
-        raise LogFormatError(f"log misses joint column(s) {missing} of robot "
-                             f"{robot.description.name!r}")
-    t = df["time"].to_numpy(float)
-    n = t.size
-    dt = float(np.median(np.diff(t)))
-    win = max(5, int(round(window / dt)) | 1)
-    if win > n:
-        win = n if n % 2 else n - 1
-    q = df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float)
-    qd, qdd = _deriv(q, win, 1, dt), _deriv(q, win, 2, dt)
-    # attitude and rates smoothed over the same window (white attitude noise would
-    # otherwise be differentiated twice through the sole positions)
-    quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
-    quat_I = quat_I * np.where(quat_I[:, :1] < 0, -1.0, 1.0)
-    quat_I = _deriv(quat_I, win, 0, dt)
-    R_WI = quat_to_rotation(quat_I / np.linalg.norm(quat_I, axis=1, keepdims=True))
-    gyro_I = _deriv(df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float), win, 0, dt)
-    jq = robot.qpos_adr(robot.joint_names)
-    jv = robot.dof_adr(robot.joint_names)
-    imu = m.site("imu").id
-    base = m.body(robot.base_body).id
-    sites = [m.site(f"{s}_sole").id for s in SIDES]
-    # pass 1: base attitude, sole positions relative to the base (world axes)
-    qpos = m.qpos0.copy()
-    qpos[:3] = 0.0
-    R_WB = np.empty((n, 3, 3))
-    R_BI = np.empty((n, 3, 3))
-    p_rel = np.empty((2, n, 3))
-    R_BS = np.empty((2, n, 3, 3))
-    p_imu = np.empty((n, 3))
-    for k in range(n):
-        qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
-        qpos[jq] = q[k]
-        d.qpos[:] = qpos
-        mujoco.mj_kinematics(m, d)
-        R_BI[k] = d.site_xmat[imu].reshape(3, 3)  # IMU in base axes (base at identity)
-        p_imu[k] = d.site_xpos[imu]
-        R_WB[k] = R_WI[k] @ R_BI[k].T
-        for i, sid in enumerate(sites):
-            p_rel[i, k] = d.site_xpos[sid]  # sole in base axes (encoders only)
-            R_BS[i, k] = d.site_xmat[sid].reshape(3, 3)
-    omega_B = np.einsum("tij,tj->ti", R_BI, gyro_I)  # base angular velocity, base axes
+    d = mujoco.MjData(robot.model)
+    sig = _signals(df, robot, window)
+    R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames(robot, d, sig)
+    omega_B = np.einsum("tij,tj->ti", R_BI, sig.gyro_I)  # base angular velocity, base axes
     # the base's angular acceleration is small and slow in walking; differentiating the
     # gyro's white noise needs a longer window than the joints
-    win_a = max(5, int(round(ALPHA_FACTOR * window / dt)) | 1)
-    if win_a > n:
-        win_a = n if n % 2 else n - 1
-    alpha_B = _deriv(omega_B, win_a, 1, dt)
-    if {"contact_ref_r", "contact_ref_l"} <= set(df.columns):
-        c = df[["contact_ref_r", "contact_ref_l"]].to_numpy(float)
-    else:
-        z = np.einsum("tj,itj->it", R_WB[:, 2, :], p_rel)  # sole heights below the base
-        c = np.column_stack([z[0] <= z[1], z[1] < z[0]]).astype(float)
-    w = c / np.maximum(c.sum(axis=1, keepdims=True), 1.0)
-    if attitude == "stance":
-        # roll and pitch from the stance sole lying flat (encoders), yaw from the IMU:
-        # an IMU attitude error of 0.1 deg would shift the CoM over a 1 m tall robot's
-        # foot by 2 mm, 1 % of the ankle torque of a 20 cm foot
-        st = np.argmax(w, axis=1)
-        R_S = R_BS[st, np.arange(n)]  # stance sole in base axes
-        R_WS = R_WB @ R_S
-        yaw = np.arctan2(R_WS[:, 1, 0], R_WS[:, 0, 0])
-        Rz = np.zeros((n, 3, 3))
-        Rz[:, 0, 0], Rz[:, 0, 1] = np.cos(yaw), -np.sin(yaw)
-        Rz[:, 1, 0], Rz[:, 1, 1] = np.sin(yaw), np.cos(yaw)
-        Rz[:, 2, 2] = 1.0
-        R_WB = Rz @ np.swapaxes(R_S, 1, 2)
-    elif attitude == "leveled":
-        # the IMU's attitude with its slow roll/pitch error removed: the mean over
-        # ``level_window`` of the tilt between it and the stance sole lying flat (the
-        # sole's own rocking alternates from step to step and averages out)
-        st = np.argmax(w, axis=1)
-        R_kin = np.swapaxes(R_BS[st, np.arange(n)], 1, 2)  # base in a flat-sole frame
-        D = R_WB @ np.swapaxes(R_kin, 1, 2)  # IMU-based sole attitude (yaw + tilt error)
-        tilt = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0]], axis=1)
-        k_lv = max(1, int(round(level_window / dt)))
-        tilt = uniform_filter1d(tilt, min(k_lv, n), axis=0, mode="nearest")
-        corr = np.column_stack([-tilt, np.zeros(n)])
-        R_WB = _small_rotations(corr) @ R_WB
-    elif attitude != "imu":
-        raise ValueError(f"attitude must be 'imu', 'leveled' or 'stance', got {attitude!r}")
-    quat_B = rotation_to_quat(R_WB)
-    # stance sole still: v_B = -R (w x p + p'), a_B = -R (w x (w x p) + 2 w x p' + a x p + p'')
-    # (base axes; attitude noise is never differentiated)
-    v_loc = np.zeros((n, 3))
-    a_loc = np.zeros((n, 3))
-    for i in range(2):
-        p, pd_, pdd = p_rel[i], _deriv(p_rel[i], win, 1, dt), _deriv(p_rel[i], win, 2, dt)
-        v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
-        a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
-                                  + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
-    v_B = -np.einsum("tij,tj->ti", R_WB, v_loc)
-    a_B = -np.einsum("tij,tj->ti", R_WB, a_loc)
-    if blend is not None and {"imu_acc_x", "imu_acc_y", "imu_acc_z"} <= set(df.columns):
-        # complementary blend: the accelerometer (lever arm of the IMU removed) with its
-        # slow errors (bias, gravity leaking through an attitude error) replaced by the
-        # odometry's, whose own error (encoder quantization differentiated twice) is fast
-        f_I = df[["imu_acc_x", "imu_acc_y", "imu_acc_z"]].to_numpy(float)
-        r_B = p_imu - 0.0  # IMU position in base axes (base origin at 0)
-        a_imu = np.einsum("tij,tj->ti", R_WI, f_I)
-        a_imu[:, 2] += float(m.opt.gravity[2])
-        lever = (np.cross(alpha_B, r_B) + np.cross(omega_B, np.cross(omega_B, r_B)))
-        a_acc = _deriv(a_imu - np.einsum("tij,tj->ti", R_WB, lever), win, 0, dt)
-        win_b = max(5, int(round(blend / dt)) | 1)
-        if win_b > n:
-            win_b = n if n % 2 else n - 1
-        a_B = a_acc + _deriv(a_B - a_acc, win_b, 0, dt)
-    # pass 2: inverse dynamics, ground wrench per foot, sensor wrenches
-    ft = robot.description.sensing == "ft"
-    feet_b = [m.body(f.body).id for f in robot.description.feet]
-    ft_sites = [m.site(f"{s}_ft").id for s in SIDES] if ft else []
-    ground = np.zeros((2, n, 6))
-    ft_out = np.zeros((2, n, 6))
-    jac = np.zeros((6, m.nv))
-    f_rne = np.zeros(m.nv)
-    try:
-        for k in range(n):
-            d.qpos[:3] = 0.0
-            d.qpos[3:7] = quat_B[k]
-            d.qpos[jq] = q[k]
-            d.qvel[:3], d.qvel[3:6], d.qvel[jv] = v_B[k], omega_B[k], qd[k]
-            d.qacc[:3], d.qacc[3:6], d.qacc[jv] = a_B[k], alpha_B[k], qdd[k]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            mujoco.mj_comVel(m, d)
-            mujoco.mj_rne(m, d, 1, f_rne)  # M qdd + c (the free rows have no armature)
-            f_free = f_rne[:6].copy()
-            alone = np.empty((2, 6))
-            for i, sid in enumerate(sites):
-                mujoco.mj_jacSite(m, d, jac[:3], jac[3:], sid)
-                alone[i] = np.linalg.solve(jac[:, :6].T, f_free)
-            share = _share(w[k], alone, d.site_xpos[sites[0]], d.site_xpos[sites[1]])
-            for i in range(2):
-                ground[i, k] = share[i] * alone[i]
-            if ft:
-                d.xfrc_applied[:] = 0.0
-                for i, b in enumerate(feet_b):
-                    F, tau = ground[i, k, :3], ground[i, k, 3:]
-                    d.xfrc_applied[b, :3] = F
-                    d.xfrc_applied[b, 3:] = tau + np.cross(d.site_xpos[sites[i]] - d.xipos[b], F)
-                mujoco.mj_rnePostConstraint(m, d)
-                for i, b in enumerate(feet_b):
-                    tq, fo = d.cfrc_int[b, :3], d.cfrc_int[b, 3:]
-                    p_site = d.site_xpos[ft_sites[i]]
-                    tq_site = tq - np.cross(p_site - d.subtree_com[m.body_rootid[b]], fo)
-                    R = d.site_xmat[ft_sites[i]].reshape(3, 3)
-                    ft_out[i, k, :3] = -(R.T @ fo)
-                    ft_out[i, k, 3:] = -(R.T @ tq_site)
-    finally:
-        d.xfrc_applied[:] = 0.0
+    alpha_B = _deriv(omega_B, _win(ALPHA_FACTOR * window, sig.dt, sig.t.size), 1, sig.dt)
+    w = _stance_weights(df, R_WB, p_rel)
+    R_WB = _attitude(attitude, R_WB, R_BS, w, sig.dt, level_window)
+    v_B, a_B = _base_motion(df, robot, sig, R_WB, p_rel, p_imu, w, omega_B, alpha_B, blend)
+    ground, ft_out = _inverse_dynamics(robot, d, sig, rotation_to_quat(R_WB), v_B, omega_B,
+                                       a_B, alpha_B, w)
     sensor: dict[str, np.ndarray] = {}
-    if ft:
+    if robot.description.sensing == "ft":
         for i, s in enumerate(SIDES):
             for a, ax in enumerate(FT_AXES):
                 sensor[f"ft_{s}_{ax}"] = ft_out[i, :, a]
@@ -273,8 +346,7 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
             cells = _corner_split(robot, i, ground[i], R_WB, p_rel[i])
             for kk in range(4):
                 sensor[f"force_{s}{kk + 1}"] = cells[:, kk]
-    del base
-    return WrenchEstimate(time=t, ground=ground, sensor=sensor)
+    return WrenchEstimate(time=sig.t, ground=ground, sensor=sensor, contact=w > 0)
 
 
 def _small_rotations(rv: np.ndarray) -> np.ndarray:

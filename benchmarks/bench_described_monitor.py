@@ -1,0 +1,156 @@
+"""The monitor on described robots: G1 (corner cells) and Talos (ankle F/T channels).
+
+1. G1, the paper's scenario transposed (w = 9 % of m g; frozen 0, +w, drift w/s, -w on
+   the right foot's four cells at 5 s) on a 20 s walk (seed 1): delay, kind, offset-size
+   error and recovery RMSE; fault-free 60 s walks, seeds 1..N (thresholds shipped in
+   ``grfguard/data/g1_thresholds.toml``, calibrated on seeds 101-104): false alarms, with
+   the shipped SURALP thresholds for comparison.
+2. Talos, ``ft_r_fz`` and ``ft_r_tx``, one fault per run (offset +-w, drift w/s, frozen 0,
+   gain 1.2; w = 9 % of m g, x foot length for torques) at 5 s on a 20 s walk (seed 1):
+   delay, kind, recovery RMSE (whole fault from 1 s after onset; frozen: where the
+   virtual channel is valid); fault-free 60 s walks: false alarms (channel thresholds
+   shipped in ``grfguard/data/talos_channels.toml``, seeds 101-104).
+
+Updates the ``## Monitoring Talos and G1`` section of BENCHMARKS.md.
+
+Usage: ``.venv/bin/python benchmarks/bench_described_monitor.py [--clean-walks 10]``
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _common import update_section  # noqa: E402
+
+from grfguard.detect.channels import channel_valid_mask  # noqa: E402
+from grfguard.detect.config import MonitorConfig  # noqa: E402
+from grfguard.estimate.described import run_described, with_described_vfs  # noqa: E402
+from grfguard.evaluate.detection import evaluate_detection  # noqa: E402
+from grfguard.faults import inject_faults  # noqa: E402
+from grfguard.faults.inject import apply_fault  # noqa: E402
+from grfguard.faults.spec import parse_fault_spec  # noqa: E402
+from grfguard.model.description import FT_AXES, load_description  # noqa: E402
+from grfguard.model.loader import load_model  # noqa: E402
+from grfguard.model.robot import SENSOR_NAMES  # noqa: E402
+from grfguard.sim.config import NoiseConfig  # noqa: E402
+from grfguard.sim.wholebody import scaled_gait, simulate_robot  # noqa: E402
+
+SECTION = "## Monitoring Talos and G1"
+
+
+def _walk(r, duration: float, seed: int):
+    return with_described_vfs(
+        simulate_robot(r, scaled_gait(r, duration=duration), NoiseConfig(), seed=seed), r)
+
+
+def g1_part(n_clean: int) -> list[str]:
+    r = load_model(load_description("g1"))
+    W = r.mass * 9.81
+    w = 0.09 * W
+    faults = ["r1=frozen:0@5", f"r2=offset:{w:.2f}@5", f"r3=drift:{w:.2f}@5",
+              f"r4=offset:{-w:.2f}@5"]
+    walk = _walk(r, 20.0, 1)
+    res = run_described(inject_faults(walk, faults, seed=0), MonitorConfig(), r)
+    tab = evaluate_detection(res)
+    lines = [f"G1 ({r.mass:.2f} kg, w = 9 % of m g = {w:.1f} N), paper scenario at 5 s, "
+             "20 s walk, seed 1, shipped G1 thresholds:", "",
+             "| sensor | fault | delay [s] | kind | size error [% m g] | "
+             "recovered - true RMSE [% m g] |", "|---|---|---|---|---|---|"]
+    late = res["time"].to_numpy() >= 6.0
+    for s, f in zip(("r1", "r2", "r3", "r4"), faults, strict=True):
+        err = res[f"recovered_{s}"].to_numpy()[late] - res[f"true_force_{s}"].to_numpy()[late]
+        lines.append(f"| {s} | {f.split('=')[1]} | {tab.loc[s, 'delay_s']:.3f} | "
+                     f"{tab.loc[s, 'kind_estimated']} | "
+                     f"{100 * abs(tab.loc[s, 'fault_size_error_n']) / W:.3f} | "
+                     f"{100 * np.sqrt(np.nanmean(err**2)) / W:.3f} |")
+    noise = walk["force_l1"].to_numpy() - walk["true_force_l1"].to_numpy()
+    lines += ["", f"Sensor noise floor (healthy l1, measured - true): "
+              f"{100 * np.std(noise) / W:.3f} % of m g.", ""]
+    fa = {"G1 thresholds": 0, "SURALP thresholds": 0}
+    flagged = {"G1 thresholds": 0.0, "SURALP thresholds": 0.0}
+    from grfguard.detect.thresholds import default_thresholds
+
+    for seed in range(1, n_clean + 1):
+        log = _walk(r, 60.0, seed)
+        for name, cfg in (("G1 thresholds", MonitorConfig()),
+                          ("SURALP thresholds", MonitorConfig().with_thresholds(
+                              default_thresholds().replace(source="suralp")))):
+            out = run_described(log, cfg, r)
+            for s in SENSOR_NAMES:
+                f = out[f"flag_{s}"].to_numpy()
+                fa[name] += int(np.sum(f[1:] & ~f[:-1]) + f[0])
+                flagged[name] += float(f.mean()) / len(SENSOR_NAMES)
+    lines.append(f"G1 fault-free: {n_clean} walks x 60 s (seeds 1-{n_clean}): "
+                 + "; ".join(f"{k}: {v} false alarm(s), {100 * flagged[k] / n_clean:.2f} % "
+                             "of sensor-time flagged" for k, v in fa.items()) + ".")
+    return lines
+
+
+def talos_part(n_clean: int) -> list[str]:
+    r = load_model(load_description("talos"))
+    W = r.mass * 9.81
+    WL = W * r.description.feet[0].length
+    walk = _walk(r, 20.0, 1)
+    t = walk["time"].to_numpy()
+    ok = channel_valid_mask(walk, 0.15)
+    lines = ["", f"Talos ({r.mass:.2f} kg), one fault per run at 5 s, 20 s walk, seed 1, "
+             "shipped Talos channel thresholds:", "",
+             "| channel | fault | delay [s] | kind | recovered - true RMSE [% scale] | "
+             "other channels flagged |", "|---|---|---|---|---|---|"]
+    for ch, scale in (("ft_r_fz", W), ("ft_r_tx", WL)):
+        w = 0.09 * scale
+        for spec in (f"offset:{w:.2f}@5", f"offset:{-w:.2f}@5", f"drift:{w:.2f}@5",
+                     "frozen:0@5", "gain:1.2@5"):
+            f = walk.copy()
+            f[ch] = apply_fault(t, walk[ch].to_numpy(), parse_fault_spec(f"r1={spec}"),
+                                np.random.default_rng(0))
+            out = run_described(f, robot=r)
+            flag = out[f"flag_{ch}"].to_numpy()
+            others = sum(int(out[f"flag_ft_{s}_{a}"].any()) for s in "rl" for a in FT_AXES
+                         if f"ft_{s}_{a}" != ch)
+            sel = t >= 6.0
+            if spec.startswith("frozen"):
+                sel &= ok[:, 0]
+            err = out[f"recovered_{ch}"].to_numpy()[sel] - walk[ch].to_numpy()[sel]
+            delay = f"{t[np.argmax(flag)] - 5.0:.3f}" if flag.any() else "missed"
+            lines.append(f"| {ch} | {spec} | {delay} | {out[f'kind_{ch}'].iloc[-1]} | "
+                         f"{100 * np.sqrt(np.mean(err**2)) / scale:.3f} | {others} |")
+    lines.append("")
+    lines.append("Scale: m g for forces, m g x foot length (0.20 m) for torques; frozen "
+                 "recovery measured in single support and swing (the virtual channel "
+                 "there), the others over the whole fault from 6 s.")
+    fa = 0
+    for seed in range(1, n_clean + 1):
+        out = run_described(_walk(r, 60.0, seed), robot=r)
+        for s in "rl":
+            for a in FT_AXES:
+                fa += int(out[f"flag_ft_{s}_{a}"].any())
+    lines += ["", f"Talos fault-free: {n_clean} walks x 60 s (seeds 1-{n_clean}), 12 "
+              f"channels: {fa} channel(s) flagged."]
+    return lines
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--clean-walks", type=int, default=10)
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    lines = [f"Command: `.venv/bin/python benchmarks/bench_described_monitor.py "
+             f"--clean-walks {args.clean_walks}` (one core).", ""]
+    lines += g1_part(args.clean_walks)
+    lines += talos_part(args.clean_walks)
+    lines += ["", f"Wall time {time.perf_counter() - t0:.0f} s."]
+    body = "\n".join(lines)
+    print(body)
+    update_section(SECTION, body)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,161 @@
+"""The monitor's virtual-sensor columns for a described robot (Talos, G1, a user TOML).
+
+:class:`~grfguard.pipeline.Monitor` reuses a log's precomputed ``vfs_<s>``,
+``vfs_total_<side>`` and ``contact_est_<side>`` columns. For a robot described by its
+model file and TOML (:mod:`grfguard.model.description`) they come from the batch
+virtual sensor :func:`~grfguard.estimate.wrench.estimate_wrenches`:
+
+- ``vfs_<r|l><1..4>``: the corner cells' estimated forces [N] (corner-cell robots);
+- ``vfs_<r|l>_<fx..tz>``: the ankle F/T channels' estimates [N, N m] (F/T robots);
+- ``vfs_total_<r|l>``: each foot's vertical ground force [N];
+- ``contact_est_<r|l>``: the feet taken as in stance (0/1).
+
+Example:
+    >>> from grfguard.estimate.described import with_described_vfs
+    >>> out = Monitor.for_log(with_described_vfs(log)).run(...)   # G1 log
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from typing import Any
+
+import pandas as pd
+
+from grfguard.errors import LogFormatError
+from grfguard.model.description import SIDES
+
+__all__ = [
+    "described_robot",
+    "described_thresholds",
+    "is_described",
+    "run_described",
+    "with_described_vfs",
+]
+
+
+def described_robot(df: pd.DataFrame, robot: Any = None) -> Any:
+    """The :class:`~grfguard.model.loader.LoadedRobot` of ``df``.
+
+    Args:
+        df: A log of a described robot.
+        robot: A ``LoadedRobot``, a shipped name (``talos``, ``g1``) or a TOML path; None
+            takes ``robot_name`` from the log's metadata.
+
+    Raises:
+        LogFormatError: Neither ``robot`` nor the metadata names a robot.
+    """
+    from grfguard.model.description import load_description
+    from grfguard.model.loader import LoadedRobot, load_model
+
+    if isinstance(robot, LoadedRobot):
+        return robot
+    name = robot if robot is not None else df.attrs.get("robot_name")
+    if name is None:
+        raise LogFormatError(
+            "the log's metadata names no described robot (attrs['robot_name']); pass "
+            "robot='g1', 'talos' or a robot TOML")
+    return load_model(load_description(name))
+
+
+def with_described_vfs(df: pd.DataFrame, robot: Any = None, **kwargs: Any) -> pd.DataFrame:
+    """``df`` plus the virtual-sensor columns the monitor reads (module docstring).
+
+    Args:
+        df: A log of a described robot (``time``, IMU, ``q_<joint>`` of every joint).
+        robot: As in :func:`described_robot`.
+        **kwargs: Options of :func:`~grfguard.estimate.wrench.estimate_wrenches`.
+
+    Returns:
+        A copy of ``df`` (same ``attrs``) with the added columns.
+
+    Raises:
+        LogFormatError: A joint column is missing, or the robot is not named.
+    """
+    from grfguard.estimate.wrench import estimate_wrenches, wrench_columns
+
+    rob = described_robot(df, robot)
+    est = estimate_wrenches(df, rob, **kwargs)
+    cols = wrench_columns(est)
+    out = df.copy()
+    for c in cols.columns:
+        out[c] = cols[c].to_numpy()
+    if est.contact is not None:
+        for i, s in enumerate(SIDES):
+            out[f"contact_est_{s}"] = est.contact[:, i].astype(float)
+    out.attrs = dict(df.attrs)
+    return out
+
+
+def described_thresholds(name: str) -> Any:
+    """The shipped detector thresholds of robot ``name`` (``grfguard/data/<name>_thresholds
+    .toml``, made by ``benchmarks/calibrate_described_thresholds.py`` from fault-free walks
+    of that robot), or None when none are shipped."""
+    from grfguard.detect.thresholds import Thresholds
+
+    f = resources.files("grfguard") / "data" / f"{name}_thresholds.toml"
+    if not f.is_file():
+        return None
+    return Thresholds.from_toml_text(f.read_text())
+
+
+def is_described(df: pd.DataFrame) -> bool:
+    """True when ``df``'s metadata names a described robot (``robot_name`` and
+    ``sensing``; written by the whole-body simulation and by ``grfguard run --robot``)."""
+    return "robot_name" in df.attrs and "sensing" in df.attrs
+
+
+def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd.DataFrame:
+    """The monitor over a log of a described robot.
+
+    Ankle F/T sensors: :class:`~grfguard.detect.channels.ChannelMonitor` with the robot's
+    shipped channel thresholds (``grfguard/data/<name>_channels.toml``) on the
+    virtual channels (``config`` is not used).
+
+    Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
+    then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path, with the
+    robot's shipped thresholds (:func:`described_thresholds`) when ``config`` carries
+    the default ones (SURALP's).
+
+    Args:
+        df: The log.
+        config: A :class:`~grfguard.detect.config.MonitorConfig` (default thresholds
+            when None).
+        robot: As in :func:`described_robot`.
+
+    Raises:
+        LogFormatError: The robot's sensing is not supported by the monitor.
+    """
+    from grfguard.detect.config import MonitorConfig
+    from grfguard.detect.detector import VFS_TOTAL_COLUMNS
+    from grfguard.detect.monitor import Monitor
+    from grfguard.detect.thresholds import default_thresholds
+    from grfguard.io.schema import vfs_col
+    from grfguard.model.robot import SENSOR_NAMES
+
+    cfg = config if config is not None else MonitorConfig()
+    name = df.attrs.get("robot_name")
+    own = described_thresholds(str(name)) if isinstance(name, str) else None
+    if own is not None and cfg.thresholds == default_thresholds():
+        cfg = cfg.with_thresholds(own)
+    sensing = df.attrs.get("sensing")
+    if sensing == "corners":
+        need = [vfs_col(s) for s in SENSOR_NAMES] + list(VFS_TOTAL_COLUMNS)
+        if not all(c in df.columns for c in need):
+            df = with_described_vfs(df, robot)
+        return Monitor.for_log(df, cfg).run(df)
+    if sensing == "ft":
+        from grfguard.detect.channels import ChannelConfig, ChannelMonitor
+
+        f = resources.files("grfguard") / "data" / f"{name}_channels.toml"
+        if not f.is_file():
+            raise LogFormatError(
+                f"no channel thresholds shipped for F/T robot {name!r}; calibrate them "
+                "with grfguard.detect.channels.calibrate_channels on fault-free logs and "
+                "run ChannelMonitor(config).run(with_described_vfs(log))")
+        if not all(f"vfs_{c[3:]}" in df for c in df.columns if c.startswith("ft_")):
+            df = with_described_vfs(df, robot)
+        return ChannelMonitor(ChannelConfig.from_toml_text(f.read_text(), str(f))).run(df)
+    raise LogFormatError(
+        f"the monitor does not watch {sensing!r} sensing (robot {name!r}); 'corners' and "
+        "'ft' are supported")
