@@ -18,16 +18,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "grfguard"
 MAX_LINES = 80
 
 #: ``"path/relative/to/grfguard.py::function"`` -> reason it may stay long. Keep short.
-EXCEPTIONS: dict[str, str] = {
-    "estimate/wrench.py::estimate_wrenches": "owned by the estimate helper (issue 8)",
-    "io/bagwrite.py::write_bag": "not split yet",
-    "io/mcap_export.py::export_mcap": "not split yet",
-    "io/plausibility.py::check_log": "not split yet",
-    "io/rosbag.py::read_raw": "not split yet",
-    "io/rosbag.py::read_bag": "not split yet",
-    "report/html.py::sensor_figure_specs": "not split yet",
-    "report/html.py::overview_figure_specs": "not split yet",
-}
+EXCEPTIONS: dict[str, str] = {}
 
 #: Layers the stages must never import.
 ABOVE = ("grfguard.sim", "grfguard.faults", "grfguard.report", "grfguard.campaign",

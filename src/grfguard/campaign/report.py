@@ -21,6 +21,7 @@ import pandas as pd
 from grfguard.campaign import analysis as an
 from grfguard.campaign.store import ResultStore
 from grfguard.io.logio import to_jsonable
+from grfguard.report.html import BASE_CSS
 
 __all__ = [
     "plot_detection_rates",
@@ -154,18 +155,7 @@ def plot_delay_vs_false_alarms(curve: pd.DataFrame):
     return fig, axes
 
 
-_CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0;color:#222;
-background:#fafafa}
-header{background:#1f2d3d;color:#fff;padding:14px 24px}
-header h1{margin:0;font-size:20px;font-weight:600}
-header p{margin:4px 0 0;font-size:13px;opacity:.8}
-main{padding:12px 24px;max-width:1500px}
-h2{font-size:16px;margin:22px 0 8px}
-table{border-collapse:collapse;font-size:13px;background:#fff}
-th,td{border:1px solid #ddd;padding:4px 8px;text-align:right;vertical-align:top}
-th{background:#f0f2f5}
-td:first-child{text-align:left;font-weight:600}
+_CSS = BASE_CSS + """td:first-child{text-align:left;font-weight:600}
 .fig{background:#fff;border:1px solid #e3e3e3;margin:10px 0;max-width:100%}
 .note{font-size:12px;color:#555}
 """

@@ -162,19 +162,9 @@ def write_bag(
     Returns:
         The path written.
     """
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
     path = Path(path)
     suffix = path.suffix.lower()
-    if storage is None:
-        storage = {".db3": "sqlite3"}.get(suffix, "mcap")
-    if storage not in ("mcap", "sqlite3"):
-        raise ConfigError(f"bag storage must be 'mcap' or 'sqlite3', got {storage!r}")
-    single = suffix in (".mcap", ".db3")
-    if single and {".mcap": "mcap", ".db3": "sqlite3"}[suffix] != storage:
-        raise ConfigError(f"{path}: suffix {suffix} does not match storage {storage!r}")
-    if path.exists():
-        raise ConfigError(f"{path} exists already; remove it or choose another name")
+    storage, single = _storage_of(path, storage)
     missing = [c for c in (TIME, *IMU_ACC, *IMU_GYRO, *IMU_QUAT, *JOINT_COLUMNS) if c not in log]
     if missing:
         raise LogFormatError(f"write_bag: the log lacks column(s) {missing}")
@@ -186,20 +176,10 @@ def write_bag(
     names = list(joint_names) if joint_names is not None else list(JOINT_NAMES)
     if len(names) != len(JOINT_NAMES):
         raise ConfigError(f"joint_names needs {len(JOINT_NAMES)} names, got {len(names)}")
-    rates = {
-        "/imu/data": imu_rate_hz,
-        "/joint_states": joint_rate_hz,
-        **{f"/foot/{s}/load_cells": force_rate_hz for s in SIDES},
-        **{f"/foot/{s}/wrench": force_rate_hz for s in SIDES},
-        "/gait/zmp_ref": 1.0 / dt,
-        "/gait/contact_ref": 1.0 / dt,
-    }
-    rates.update(rates_hz or {})
+    rates = _rates(imu_rate_hz, joint_rate_hz, force_rate_hz, 1.0 / dt, rates_hz)
     from grfguard.estimate.vfs import _robot_from_attrs
 
-    robot = _robot_from_attrs(log.attrs)
-    pos = robot.sensor_positions_in_foot()
-
+    pos = _robot_from_attrs(log.attrs).sensor_positions_in_foot()
     # per topic: (typename, serialised rows, receive ns)
     out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     omit = set(omit)
@@ -214,55 +194,117 @@ def write_bag(
             g0, g1 = gaps[topic]
             idx = idx[(t[idx] < g0) | (t[idx] >= g1)]
         n = idx.size
-        sample_ns = START_NS + np.round(t[idx] * 1e9).astype(np.int64)
-        jit = np.clip(rng.normal(0.0, stamp_jitter_s, n), -3 * stamp_jitter_s, 3 * stamp_jitter_s)
-        stamp_ns = sample_ns + np.round(jit * 1e9).astype(np.int64)
-        lat = latency_s + rng.exponential(latency_jitter_s, n) if latency_jitter_s > 0 else (
-            np.full(n, latency_s))
-        # in order per topic, at least 1 us apart (a transport queues, it does not reorder)
-        step_ns = np.arange(n, dtype=np.int64) * 1000
-        recv_ns = sample_ns + np.round(lat * 1e9).astype(np.int64)
-        recv_ns = np.maximum.accumulate(recv_ns - step_ns) + step_ns
-        cols = log.iloc[idx]
-        if topic == "/imu/data":
-            tpl = _template(ts, typename, frame="imu_link")
+        stamp_ns, recv_ns = _stamps(t[idx], rng, stamp_jitter_s, latency_s, latency_jitter_s)
+        tpl, vals = _topic_values(topic, typename, log, idx, ts, names, pos, stamp_ns)
+        out[topic] = (typename, _cdr.fill(tpl, typename, ts, n, vals), recv_ns)
+    _write_storage(path, suffix, storage, single, out, log.attrs, ts)
+    return path
+
+
+def _rates(imu_rate_hz: float, joint_rate_hz: float, force_rate_hz: float, log_rate_hz: float,
+           rates_hz: Mapping[str, float] | None) -> dict[str, float]:
+    """Rate of every topic [Hz] (the gait topics at the log's rate), overrides applied."""
+    rates = {
+        "/imu/data": imu_rate_hz,
+        "/joint_states": joint_rate_hz,
+        **{f"/foot/{s}/load_cells": force_rate_hz for s in SIDES},
+        **{f"/foot/{s}/wrench": force_rate_hz for s in SIDES},
+        "/gait/zmp_ref": log_rate_hz,
+        "/gait/contact_ref": log_rate_hz,
+    }
+    rates.update(rates_hz or {})
+    return rates
+
+
+def _storage_of(path: Path, storage: str | None) -> tuple[str, bool]:
+    """The storage plugin name and whether ``path`` is a single storage file.
+
+    Raises:
+        ConfigError: Unknown storage, a suffix that contradicts it, or ``path`` exists.
+    """
+    suffix = path.suffix.lower()
+    if storage is None:
+        storage = {".db3": "sqlite3"}.get(suffix, "mcap")
+    if storage not in ("mcap", "sqlite3"):
+        raise ConfigError(f"bag storage must be 'mcap' or 'sqlite3', got {storage!r}")
+    single = suffix in (".mcap", ".db3")
+    if single and {".mcap": "mcap", ".db3": "sqlite3"}[suffix] != storage:
+        raise ConfigError(f"{path}: suffix {suffix} does not match storage {storage!r}")
+    if path.exists():
+        raise ConfigError(f"{path} exists already; remove it or choose another name")
+    return storage, single
+
+
+def _stamps(t: np.ndarray, rng: np.random.Generator, stamp_jitter_s: float, latency_s: float,
+            latency_jitter_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Header stamps and receive times [ns] of messages sampled at ``t`` [s]: clipped
+    Gaussian stamp jitter, latency plus an exponential part; receive times in order per
+    topic, at least 1 us apart (a transport queues, it does not reorder)."""
+    n = t.size
+    sample_ns = START_NS + np.round(t * 1e9).astype(np.int64)
+    jit = np.clip(rng.normal(0.0, stamp_jitter_s, n), -3 * stamp_jitter_s, 3 * stamp_jitter_s)
+    stamp_ns = sample_ns + np.round(jit * 1e9).astype(np.int64)
+    lat = latency_s + rng.exponential(latency_jitter_s, n) if latency_jitter_s > 0 else (
+        np.full(n, latency_s))
+    step_ns = np.arange(n, dtype=np.int64) * 1000
+    recv_ns = sample_ns + np.round(lat * 1e9).astype(np.int64)
+    recv_ns = np.maximum.accumulate(recv_ns - step_ns) + step_ns
+    return stamp_ns, recv_ns
+
+
+def _topic_values(topic: str, typename: str, log: pd.DataFrame, idx: np.ndarray, ts: Any,
+                  names: list[str], pos: np.ndarray,
+                  stamp_ns: np.ndarray) -> tuple[Any, dict[str, np.ndarray]]:
+    """Message template and field values (rows ``idx`` of ``log``) of one topic."""
+    cols = log.iloc[idx]
+    if topic == "/imu/data":
+        tpl = _template(ts, typename, frame="imu_link")
+        vals = {
+            **{f"orientation.{a}": cols[c].to_numpy(float) for a, c in zip("wxyz", IMU_QUAT,
+                                                                          strict=True)},
+            **{f"angular_velocity.{a}": cols[c].to_numpy(float)
+               for a, c in zip("xyz", IMU_GYRO, strict=True)},
+            **{f"linear_acceleration.{a}": cols[c].to_numpy(float)
+               for a, c in zip("xyz", IMU_ACC, strict=True)},
+            **_stamp_values(stamp_ns),
+        }
+    elif topic == "/joint_states":
+        tpl = _template(ts, typename, frame="", names=names)
+        q = log[list(JOINT_COLUMNS)].to_numpy(float)
+        qd = np.gradient(q, log[TIME].to_numpy(float), axis=0)
+        vals = {"position": q[idx], "velocity": qd[idx], **_stamp_values(stamp_ns)}
+    elif topic == "/gait/zmp_ref":
+        tpl = _template(ts, typename, frame="world")
+        vals = {"point.x": cols[ZMP_REF[0]].to_numpy(float),
+                "point.y": cols[ZMP_REF[1]].to_numpy(float), **_stamp_values(stamp_ns)}
+    elif topic == "/gait/contact_ref":
+        tpl = _template(ts, typename, n=2)
+        vals = {"data": cols[list(CONTACT_REF)].to_numpy(float)}
+    else:
+        side = topic.split("/")[2]
+        f = np.stack([log[force_col(f"{side}{k}")].to_numpy(float)[idx]
+                      for k in range(1, 5)], axis=1)
+        if typename == "std_msgs/msg/Float64MultiArray":
+            tpl = _template(ts, typename, n=4)
+            vals = {"data": f}
+        else:
+            tpl = _template(ts, typename, frame=f"{side}_sole")
             vals = {
-                **{f"orientation.{a}": cols[c].to_numpy(float) for a, c in zip("wxyz", IMU_QUAT,
-                                                                              strict=True)},
-                **{f"angular_velocity.{a}": cols[c].to_numpy(float)
-                   for a, c in zip("xyz", IMU_GYRO, strict=True)},
-                **{f"linear_acceleration.{a}": cols[c].to_numpy(float)
-                   for a, c in zip("xyz", IMU_ACC, strict=True)},
+                "wrench.force.z": f.sum(axis=1),
+                "wrench.torque.x": f @ pos[:, 1],
+                "wrench.torque.y": -(f @ pos[:, 0]),
                 **_stamp_values(stamp_ns),
             }
-        elif topic == "/joint_states":
-            tpl = _template(ts, typename, frame="", names=names)
-            q = log[list(JOINT_COLUMNS)].to_numpy(float)
-            qd = np.gradient(q, t, axis=0)
-            vals = {"position": q[idx], "velocity": qd[idx], **_stamp_values(stamp_ns)}
-        elif topic == "/gait/zmp_ref":
-            tpl = _template(ts, typename, frame="world")
-            vals = {"point.x": cols[ZMP_REF[0]].to_numpy(float),
-                    "point.y": cols[ZMP_REF[1]].to_numpy(float), **_stamp_values(stamp_ns)}
-        elif topic == "/gait/contact_ref":
-            tpl = _template(ts, typename, n=2)
-            vals = {"data": cols[list(CONTACT_REF)].to_numpy(float)}
-        else:
-            side = topic.split("/")[2]
-            f = np.stack([log[force_col(f"{side}{k}")].to_numpy(float)[idx]
-                          for k in range(1, 5)], axis=1)
-            if typename == "std_msgs/msg/Float64MultiArray":
-                tpl = _template(ts, typename, n=4)
-                vals = {"data": f}
-            else:
-                tpl = _template(ts, typename, frame=f"{side}_sole")
-                vals = {
-                    "wrench.force.z": f.sum(axis=1),
-                    "wrench.torque.x": f @ pos[:, 1],
-                    "wrench.torque.y": -(f @ pos[:, 0]),
-                    **_stamp_values(stamp_ns),
-                }
-        out[topic] = (typename, _cdr.fill(tpl, typename, ts, n, vals), recv_ns)
+    return tpl, vals
+
+
+def _write_storage(path: Path, suffix: str, storage: str, single: bool,
+                   out: dict[str, tuple[str, np.ndarray, np.ndarray]], attrs: dict,
+                   ts: Any) -> None:
+    """Write the serialised rows of every topic in receive order, with grfguard's
+    metadata (custom data and a META_TOPIC message); a single file is written through a
+    temporary rosbag2 directory."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
 
     tmpdir = path.with_name(path.name + ".bagtmp") if single else path
     if single and tmpdir.exists():
@@ -274,7 +316,7 @@ def write_bag(
     order = np.argsort(recv_all, kind="stable")
     try:
         with Writer(tmpdir, version=9, storage_plugin=plugin) as writer:
-            meta = {k: v for k, v in log.attrs.items() if k != "source"}
+            meta = {k: v for k, v in attrs.items() if k != "source"}
             writer.set_custom_data("grfguard", json.dumps(_jsonable(meta), sort_keys=True))
             conns = [writer.add_connection(tp, v[0], typestore=ts) for tp, v in out.items()]
             # the same metadata as a message: a single .mcap/.db3 file has no metadata.yaml
@@ -293,7 +335,6 @@ def write_bag(
         (file,) = [p for p in tmpdir.iterdir() if p.suffix == suffix]
         file.replace(path)
         shutil.rmtree(tmpdir)
-    return path
 
 
 def _jsonable(v: Any) -> Any:

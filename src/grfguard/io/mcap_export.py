@@ -121,19 +121,9 @@ def export_mcap(
     Raises:
         LogFormatError: ``df`` lacks result columns (it is not an output of ``run``).
     """
-    from mcap.writer import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    need = [TIME, *COM_EST_COLUMNS, *(c for s in SENSOR_NAMES for c in (
-        force_col(s), vfs_col(s), recovered_col(s), flag_col(s), kind_col(s))),
-        *(f"vfs_total_{side}" for side in SIDES),
-        *(f"vfs_cop_{side}_{a}" for side in SIDES for a in "xy")]
-    missing = [c for c in need if c not in df.columns]
-    if missing:
-        raise LogFormatError(
-            f"export: the log lacks {missing[:6]}{'...' if len(missing) > 6 else ''}; export "
-            "the output of `grfguard run`, not its input"
-        )
+    _check_result_columns(df)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     ts = get_typestore(Stores.ROS2_HUMBLE)
@@ -144,24 +134,7 @@ def export_mcap(
     n = len(df)
     stamp = {"header.stamp.sec": ns // 1_000_000_000, "header.stamp.nanosec": ns % 1_000_000_000}
     T = ts.types
-
-    def tpl(typename: str, msg: Any) -> bytes:
-        return bytes(ts.serialize_cdr(msg, typename))
-
-    hdr = T["std_msgs/msg/Header"](
-        stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="world")
-    v3 = T["geometry_msgs/msg/Vector3"]
-    templates = {
-        "std_msgs/msg/Float64": tpl("std_msgs/msg/Float64", T["std_msgs/msg/Float64"](data=0.0)),
-        "std_msgs/msg/Bool": tpl("std_msgs/msg/Bool", T["std_msgs/msg/Bool"](data=False)),
-        "geometry_msgs/msg/WrenchStamped": tpl(
-            "geometry_msgs/msg/WrenchStamped", T["geometry_msgs/msg/WrenchStamped"](
-                header=hdr, wrench=T["geometry_msgs/msg/Wrench"](
-                    force=v3(x=0.0, y=0.0, z=0.0), torque=v3(x=0.0, y=0.0, z=0.0)))),
-        "geometry_msgs/msg/PointStamped": tpl(
-            "geometry_msgs/msg/PointStamped", T["geometry_msgs/msg/PointStamped"](
-                header=hdr, point=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0))),
-    }
+    templates = _templates(ts)
 
     # (topic, type, rows (m, L) uint8, times ns)
     streams: list[tuple[str, str, Iterable[bytes], np.ndarray]] = []
@@ -190,11 +163,62 @@ def export_mcap(
     for s in SENSOR_NAMES:
         k = df[kind_col(s)].astype(str).to_numpy()
         idx = np.concatenate([[0], np.flatnonzero(k[1:] != k[:-1]) + 1])
-        msgs = [tpl("std_msgs/msg/String", T["std_msgs/msg/String"](data=str(k[i])))
+        msgs = [_ser(ts, "std_msgs/msg/String", T["std_msgs/msg/String"](data=str(k[i])))
                 for i in idx]
         streams.append((f"/grfguard/{s}/kind", "std_msgs/msg/String", msgs, ns[idx]))
 
-    # system status
+    streams.append(_status_stream(df, ns, status_rate_hz, ts))
+    _write_mcap(path, streams, ts)
+    counts = {topic: len(tt) for (topic, _, _, tt) in streams}
+    if layout is not None:
+        Path(layout).write_text(json.dumps(foxglove_layout(), indent=2))
+    return counts
+
+
+def _check_result_columns(df: pd.DataFrame) -> None:
+    """Raise :class:`LogFormatError` if ``df`` is not an output of ``grfguard run``."""
+    need = [TIME, *COM_EST_COLUMNS, *(c for s in SENSOR_NAMES for c in (
+        force_col(s), vfs_col(s), recovered_col(s), flag_col(s), kind_col(s))),
+        *(f"vfs_total_{side}" for side in SIDES),
+        *(f"vfs_cop_{side}_{a}" for side in SIDES for a in "xy")]
+    missing = [c for c in need if c not in df.columns]
+    if missing:
+        raise LogFormatError(
+            f"export: the log lacks {missing[:6]}{'...' if len(missing) > 6 else ''}; export "
+            "the output of `grfguard run`, not its input"
+        )
+
+
+def _ser(ts: Any, typename: str, msg: Any) -> bytes:
+    """CDR bytes of ``msg``."""
+    return bytes(ts.serialize_cdr(msg, typename))
+
+
+def _templates(ts: Any) -> dict[str, bytes]:
+    """Zero-valued serialised messages of the numeric topic types (filled per row)."""
+    T = ts.types
+    hdr = T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="world")
+    v3 = T["geometry_msgs/msg/Vector3"]
+    return {
+        "std_msgs/msg/Float64": _ser(ts, "std_msgs/msg/Float64",
+                                     T["std_msgs/msg/Float64"](data=0.0)),
+        "std_msgs/msg/Bool": _ser(ts, "std_msgs/msg/Bool", T["std_msgs/msg/Bool"](data=False)),
+        "geometry_msgs/msg/WrenchStamped": _ser(
+            ts, "geometry_msgs/msg/WrenchStamped", T["geometry_msgs/msg/WrenchStamped"](
+                header=hdr, wrench=T["geometry_msgs/msg/Wrench"](
+                    force=v3(x=0.0, y=0.0, z=0.0), torque=v3(x=0.0, y=0.0, z=0.0)))),
+        "geometry_msgs/msg/PointStamped": _ser(
+            ts, "geometry_msgs/msg/PointStamped", T["geometry_msgs/msg/PointStamped"](
+                header=hdr, point=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0))),
+    }
+
+
+def _status_stream(df: pd.DataFrame, ns: np.ndarray, status_rate_hz: float,
+                   ts: Any) -> tuple[str, str, list[bytes], np.ndarray]:
+    """``/grfguard/status`` DiagnosticArray messages: the system level and one status per
+    sensor, at ``status_rate_hz`` and on every change."""
+    T = ts.types
     system, sensor = _levels(df)
     idx = _status_rows(df, status_rate_hz)
     DS, KV = T["diagnostic_msgs/msg/DiagnosticStatus"], T["diagnostic_msgs/msg/KeyValue"]
@@ -213,11 +237,15 @@ def export_mcap(
             status.append(DS(level=int(sensor[i, j]),
                              name=f"grfguard/{s}", message=kinds[s][i], hardware_id=s,
                              values=[]))
-        msgs.append(tpl("diagnostic_msgs/msg/DiagnosticArray",
-                        T["diagnostic_msgs/msg/DiagnosticArray"](header=h, status=status)))
-    streams.append(("/grfguard/status", "diagnostic_msgs/msg/DiagnosticArray", msgs, ns[idx]))
+        msgs.append(_ser(ts, "diagnostic_msgs/msg/DiagnosticArray",
+                         T["diagnostic_msgs/msg/DiagnosticArray"](header=h, status=status)))
+    return "/grfguard/status", "diagnostic_msgs/msg/DiagnosticArray", msgs, ns[idx]
 
-    counts: dict[str, int] = {}
+
+def _write_mcap(path: Path, streams: list[tuple[str, str, Any, np.ndarray]], ts: Any) -> None:
+    """Write every stream's messages in time order (through a temporary file)."""
+    from mcap.writer import Writer
+
     tmp = path.with_name(path.name + ".tmp")
     with tmp.open("wb") as fh:
         w = Writer(fh)
@@ -247,11 +275,6 @@ def export_mcap(
             seqs[j] += 1
         w.finish()
     tmp.replace(path)
-    for (topic, _, _, tt) in streams:
-        counts[topic] = len(tt)
-    if layout is not None:
-        Path(layout).write_text(json.dumps(foxglove_layout(), indent=2))
-    return counts
 
 
 def foxglove_layout() -> dict[str, Any]:

@@ -323,10 +323,15 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
     findings (empty when the log looks right).
     """
     r = ranges_for(robot)
-    w = r.weight_n
-    out: list[LogIssue] = []
     if len(df) > _CHECK_ROWS:  # statistics of the whole log: evenly spaced rows suffice
         df = df.iloc[:: len(df) // _CHECK_ROWS]
+    return [*_check_forces(df, r.weight_n), *_check_acc(df), *_check_joints(df, r),
+            *_check_quat(df, r)]
+
+
+def _check_forces(df: pd.DataFrame, w: float) -> list[LogIssue]:
+    """Force units (median summed force vs the weight ``w`` [N]) and wrong-foot wiring."""
+    out: list[LogIssue] = []
     fcols = [c for c in df.columns if c.startswith("force_")]
     if fcols:
         f = df[fcols].pipe(_numeric)
@@ -344,6 +349,12 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
                     f"robot weighs {w:.4g} N ({ratio:.3g} weights); {hint}")))
         if all(f"force_{s}{k}" in df.columns for s in "rl" for k in range(1, 5)):
             out.extend(_wrong_foot(df, w))
+    return out
+
+
+def _check_acc(df: pd.DataFrame) -> list[LogIssue]:
+    """Acceleration in g, or with gravity removed (median |imu_acc| vs g)."""
+    out: list[LogIssue] = []
     acols = [f"imu_acc_{a}" for a in "xyz"]
     if all(c in df.columns for c in acols):
         a = df[acols].pipe(_numeric)
@@ -359,6 +370,12 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
                     f"the median |imu_acc| is {med:.3g} m/s^2, expected about {G} (the "
                     "accelerometer's specific force, gravity included); check the units and "
                     "that gravity was not removed")))
+    return out
+
+
+def _check_joints(df: pd.DataFrame, r: PlausibleRanges) -> list[LogIssue]:
+    """Joint angles beyond their limits in >= 1 % of the rows (degrees?)."""
+    out: list[LogIssue] = []
     for c in [c for c in df.columns if c.startswith("q_")]:
         lim = r.limits(c)
         v = pd.to_numeric(df[c], errors="coerce").to_numpy(dtype=float)
@@ -371,6 +388,12 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
                 f"{c} is outside its limits [{lim[0]:.4g}, {lim[1]:.4g}] rad in "
                 f"{100 * frac:.3g} % of the rows (max |{c}| = {np.abs(v).max():.4g}); "
                 "degrees? convert the joint angles to rad")))
+    return out
+
+
+def _check_quat(df: pd.DataFrame, r: PlausibleRanges) -> list[LogIssue]:
+    """IMU quaternion not of unit norm, or a 180 deg yaw (x-y-z-w order)."""
+    out: list[LogIssue] = []
     qcols = [f"imu_quat_{a}" for a in "wxyz"]
     if all(c in df.columns for c in qcols):
         q = df[qcols].pipe(_numeric)
@@ -387,7 +410,6 @@ def check_log(df: pd.DataFrame, robot: Any) -> list[LogIssue]:
                     "imu_quat_z ~ 1): if your IMU writes x-y-z-w, reorder the columns to "
                     "w-x-y-z")))
     return out
-
 
 def _wrong_foot(df: pd.DataFrame, weight: float) -> list[LogIssue]:
     out = []

@@ -502,26 +502,32 @@ def read_raw(path: str | Path, topics: list[str], fast: bool = True
                    for t in topics}
         out = {t: _Topic(t, by_topic[t][0].msgtype, got[t][0], got[t][1], ros1)
                for t in topics}
-        meta: dict[str, Any] = {}
-        if META_TOPIC in by_topic:  # written by grfguard's bag writer
-            for c, _, data in reader.messages(connections=by_topic[META_TOPIC]):
-                try:
-                    meta = json.loads(reader.deserialize(data, c.msgtype).data)
-                except (ValueError, AttributeError):
-                    meta = {}
-                break
-        for r in getattr(reader, "readers", []) if not meta else []:
-            custom = getattr(getattr(getattr(r, "storage", None), "metadata", None),
-                             "custom", None) or getattr(getattr(r, "metadata", None),
-                                                        "custom", None)
-            if custom and "grfguard" in custom:
-                try:
-                    meta = json.loads(custom["grfguard"])
-                except ValueError:
-                    meta = {}
-        return out, reader.typestore, meta
+        return out, reader.typestore, _bag_metadata(reader, by_topic)
     finally:
         reader.close()
+
+
+def _bag_metadata(reader: Any, by_topic: dict[str, list[Any]]) -> dict[str, Any]:
+    """grfguard's metadata of an open bag: the META_TOPIC message written by grfguard's
+    bag writer, else the ``grfguard`` entry of the storage's custom metadata, else {}."""
+    meta: dict[str, Any] = {}
+    if META_TOPIC in by_topic:  # written by grfguard's bag writer
+        for c, _, data in reader.messages(connections=by_topic[META_TOPIC]):
+            try:
+                meta = json.loads(reader.deserialize(data, c.msgtype).data)
+            except (ValueError, AttributeError):
+                meta = {}
+            break
+    for r in getattr(reader, "readers", []) if not meta else []:
+        custom = getattr(getattr(getattr(r, "storage", None), "metadata", None),
+                         "custom", None) or getattr(getattr(r, "metadata", None),
+                                                    "custom", None)
+        if custom and "grfguard" in custom:
+            try:
+                meta = json.loads(custom["grfguard"])
+            except ValueError:
+                meta = {}
+    return meta
 
 
 _Names = tuple[list[tuple[str, ...]], np.ndarray]
@@ -700,9 +706,44 @@ def read_bag(
     raw, typestore, meta = read_raw(
         path, tmap.topics(), fast=vectorised if fast_read is None else fast_read)
     report: list[str] = []
-    stamps_used: dict[str, str] = {}
+    times, orders, stamps_used, t0_ns = _topic_times(raw, typestore, tmap, vectorised, report)
+    grid, rate = _grid(path, tmap, times)
+    rates, holes, gap_any, gaps = _rates_and_gaps(tmap, times, grid, rate, report)
+    rs = _Resampler(times, orders, holes, grid)
+    _imu_columns(rs, raw, typestore, tmap, vectorised)
+    _joint_columns(rs, raw, typestore, tmap, vectorised)
+    _signal_columns(rs, raw, typestore, tmap, vectorised)
+    rs.cols["import_gap"] = gap_any
+    df = pd.DataFrame(rs.cols)
+    attrs = dict(meta)
+    if tmap.robot is not None:
+        from grfguard.model.robot import load_robot
 
-    # times of every topic [s relative to the IMU's first message]
+        attrs["robot"] = load_robot(tmap.robot).to_dict()
+    attrs["source"] = str(path)
+    attrs["ros_import"] = {
+        "bag": str(path),
+        "rate_hz": rate,
+        "t0_ns": t0_ns,
+        "stamps": stamps_used,
+        "topic_rates_hz": rates,
+        "messages": {t: len(raw[t].packed) for t in raw},
+        "interpolation": rs.interp_used,
+        "gaps": gaps,
+        "decoder": "vectorised" if vectorised else "per-message",
+    }
+    df.attrs.update(attrs)
+    for line in report:
+        warnings.warn(line, BagImportWarning, stacklevel=2)
+    return df
+
+
+def _topic_times(raw: dict[str, _Topic], typestore: Any, tmap: TopicsMap, vectorised: bool,
+                 report: list[str]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray],
+                                             dict[str, str], int]:
+    """Times of every topic [s relative to the IMU's first message] in time order, the
+    order of its messages, the stamp used per topic and the IMU's first stamp [ns]."""
+    stamps_used: dict[str, str] = {}
     times: dict[str, np.ndarray] = {}
     orders: dict[str, np.ndarray] = {}
     t0_ns: int | None = None
@@ -715,8 +756,13 @@ def read_bag(
             t0_ns = int(ns[o][0])
         times[name] = (ns[o] - t0_ns) * 1e-9
     assert t0_ns is not None
+    return times, orders, stamps_used, t0_ns
 
-    # the grid
+
+def _grid(path: str | Path, tmap: TopicsMap,
+          times: dict[str, np.ndarray]) -> tuple[np.ndarray, float]:
+    """The output time grid [s] over the span every topic covers, and its rate [Hz]
+    (the map's, else the IMU's with its period rounded to 1 us)."""
     t_imu = times[tmap.imu_topic]
     if len(t_imu) < 2:
         raise LogFormatError(f"topic {tmap.imu_topic} has fewer than 2 messages")
@@ -730,9 +776,13 @@ def read_bag(
     k1 = int(np.floor(stop / period + 1e-9))
     if k1 <= k0:
         raise LogFormatError(f"bag {path}: the mapped topics do not overlap in time")
-    grid = np.arange(k0, k1 + 1) * period
+    return np.arange(k0, k1 + 1) * period, rate
 
-    # rates and gaps
+
+def _rates_and_gaps(tmap: TopicsMap, times: dict[str, np.ndarray], grid: np.ndarray,
+                    rate: float, report: list[str]):
+    """Median rate of every topic [Hz], its grid rows inside a gap, the union of those
+    rows and the list of gaps; refuses a topic too slow for the grid."""
     gap_any = np.zeros(len(grid), dtype=bool)
     gaps: list[dict[str, Any]] = []
     rates: dict[str, float] = {}
@@ -758,17 +808,29 @@ def read_bag(
             report.append(f"topic {name}: gap of {b - a:.3f} s from t = {a:.3f} s to "
                           f"{b:.3f} s (no message); grid rows inside are NaN and flagged "
                           "import_gap")
+    return rates, holes, gap_any, gaps
 
-    cols: dict[str, np.ndarray] = {TIME: grid}
-    interp_used: dict[str, str] = {}
 
-    def put(name: str, col: str, y: np.ndarray, how: str) -> None:
-        v = _interp(times[name], y[orders[name]], grid, how)
-        v[holes[name]] = np.nan
-        cols[col] = v
-        interp_used[col] = how
+class _Resampler:
+    """Output columns on the grid: every signal interpolated from its topic's times,
+    NaN inside the topic's gaps, the interpolation used recorded per column."""
 
-    # IMU
+    def __init__(self, times: dict[str, np.ndarray], orders: dict[str, np.ndarray],
+                 holes: dict[str, np.ndarray], grid: np.ndarray) -> None:
+        self.times, self.orders, self.holes, self.grid = times, orders, holes, grid
+        self.cols: dict[str, np.ndarray] = {TIME: grid}
+        self.interp_used: dict[str, str] = {}
+
+    def put(self, name: str, col: str, y: np.ndarray, how: str) -> None:
+        v = _interp(self.times[name], y[self.orders[name]], self.grid, how)
+        v[self.holes[name]] = np.nan
+        self.cols[col] = v
+        self.interp_used[col] = how
+
+
+def _imu_columns(rs: _Resampler, raw: dict[str, _Topic], typestore: Any, tmap: TopicsMap,
+                 vectorised: bool) -> None:
+    """IMU quaternion (short-way interpolated, normalised), gyro and accelerometer."""
     imu = raw[tmap.imu_topic]
     _expect(imu, "sensor_msgs/msg/Imu")
     v, _ = _decode(imu, typestore, list(_IMU_FIELDS.values()), vectorised)
@@ -777,16 +839,20 @@ def read_bag(
     flip = np.concatenate([[False], np.einsum("ij,ij->i", q[1:], q[:-1]) < 0])
     sign = np.where(np.logical_xor.accumulate(flip), -1.0, 1.0)
     q = q * sign[:, None]
-    qi = _interp(times[tmap.imu_topic], q[orders[tmap.imu_topic]], grid, tmap.imu_interpolation)
+    qi = _interp(rs.times[tmap.imu_topic], q[rs.orders[tmap.imu_topic]], rs.grid,
+                 tmap.imu_interpolation)
     qi /= np.linalg.norm(qi, axis=1, keepdims=True)
-    qi[holes[tmap.imu_topic]] = np.nan
+    qi[rs.holes[tmap.imu_topic]] = np.nan
     for j, c in enumerate(IMU_QUAT):
-        cols[c] = qi[:, j]
-        interp_used[c] = f"{tmap.imu_interpolation}, normalised"
+        rs.cols[c] = qi[:, j]
+        rs.interp_used[c] = f"{tmap.imu_interpolation}, normalised"
     for c in (*IMU_GYRO, *IMU_ACC):
-        put(tmap.imu_topic, c, v[_IMU_FIELDS[c]], tmap.imu_interpolation)
+        rs.put(tmap.imu_topic, c, v[_IMU_FIELDS[c]], tmap.imu_interpolation)
 
-    # joints
+
+def _joint_columns(rs: _Resampler, raw: dict[str, _Topic], typestore: Any, tmap: TopicsMap,
+                   vectorised: bool) -> None:
+    """``q_<joint>`` from the JointState topic, matched by name per message layout."""
     js = raw[tmap.joints_topic]
     _expect(js, "sensor_msgs/msg/JointState")
     v, names = _decode(js, typestore, [tmap.joints_field], vectorised, want_names=True)
@@ -812,9 +878,12 @@ def read_bag(
                                      f" has no value for joint {tmap.joint_names[jn]!r}")
             jvals[rows, j] = arr[rows, k]
     for j, jn in enumerate(JOINT_NAMES):
-        put(tmap.joints_topic, f"q_{jn}", jvals[:, j], tmap.joints_interpolation)
+        rs.put(tmap.joints_topic, f"q_{jn}", jvals[:, j], tmap.joints_interpolation)
 
-    # sensors and extra columns
+
+def _signal_columns(rs: _Resampler, raw: dict[str, _Topic], typestore: Any, tmap: TopicsMap,
+                    vectorised: bool) -> None:
+    """Force sensors and extra columns of the map's signals (one decode per topic)."""
     by_topic: dict[str, list[Signal]] = {}
     for s in tmap.signals:
         by_topic.setdefault(s.topic, []).append(s)
@@ -834,32 +903,7 @@ def read_bag(
             elif s.index is not None:
                 raise LogFormatError(f"topic {name}: field {s.field!r} is a scalar; remove "
                                      f"'index' for column {s.column}")
-            put(name, s.column, y, s.interpolation)
-
-    cols["import_gap"] = gap_any
-    df = pd.DataFrame(cols)
-    attrs = dict(meta)
-    if tmap.robot is not None:
-        from grfguard.model.robot import load_robot
-
-        attrs["robot"] = load_robot(tmap.robot).to_dict()
-    attrs["source"] = str(path)
-    attrs["ros_import"] = {
-        "bag": str(path),
-        "rate_hz": rate,
-        "t0_ns": t0_ns,
-        "stamps": stamps_used,
-        "topic_rates_hz": rates,
-        "messages": {t: len(raw[t].packed) for t in raw},
-        "interpolation": interp_used,
-        "gaps": gaps,
-        "decoder": "vectorised" if vectorised else "per-message",
-    }
-    df.attrs.update(attrs)
-    for line in report:
-        warnings.warn(line, BagImportWarning, stacklevel=2)
-    return df
-
+            rs.put(name, s.column, y, s.interpolation)
 
 def _expect(top: _Topic, msgtype: str) -> None:
     if top.msgtype != msgtype:

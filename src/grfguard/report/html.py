@@ -150,23 +150,7 @@ def sensor_figure_specs(
 
         cc = f"contact_ref_{side}"
         if cc in df.columns:
-            x, y = step_edges(t, df[cc].fillna(0).to_numpy().astype(float) > 0.5)
-            data.append(
-                {
-                    "type": "scatter",
-                    "mode": "lines",
-                    "name": f"stance ({_SIDE_NAMES.get(side, side)} foot, planned)",
-                    "x": _typed(x),
-                    "y": _typed(y),
-                    "yaxis": "y3",
-                    "fill": "tozeroy",
-                    "legendrank": 2000,
-                    "fillcolor": CONTACT_SHADE,
-                    "line": {"width": 0, "shape": "hv", "color": CONTACT_SHADE},
-                    "hoverinfo": "skip",
-                    "meta": {"signal": "contact", "column": cc},
-                }
-            )
+            data.append(_contact_trace(df, t, cc, side))
         line(f"true_force_{s}", "true", "y", dash="dot", width=1.6)
         line(f"force_{s}", "measured", "y")
         line(f"vfs_{s}", "vfs", "y")
@@ -175,123 +159,10 @@ def sensor_figure_specs(
         line(f"eta_{s}", "eta", "y2")
         fc = f"flag_{s}"
         if fc in df.columns:
-            x, y = step_edges(t, df[fc].fillna(False).to_numpy().astype(bool))
-            data.append(
-                {
-                    "type": "scatter",
-                    "mode": "lines",
-                    "name": "flag (0/1)",
-                    "x": _typed(x),
-                    "y": _typed(y),
-                    "yaxis": "y4",
-                    "line": {"color": SIGNAL_COLORS["flag"], "width": 1.2, "shape": "hv"},
-                    "hovertemplate": "flag: %{y:.0f}<extra></extra>",
-                    "meta": {"signal": "flag", "column": fc},
-                }
-            )
-
-        shapes: list[dict[str, Any]] = []
-        fm = fault_mask(df, s)
-        windows = _intervals_from_mask(t, fm) if fm is not None and fm.any() else []
-        for i, (a, b) in enumerate(windows[:MAX_FAULT_WINDOWS]):
-            shapes.append(
-                {
-                    "type": "rect",
-                    "xref": "x",
-                    "yref": "paper",
-                    "x0": a,
-                    "x1": b,
-                    "y0": 0,
-                    "y1": 1,
-                    "fillcolor": FAULT_SHADE,
-                    "line": {"width": 0},
-                    "layer": "below",
-                    "name": "injected fault",
-                    "showlegend": i == 0,
-                }
-            )
-        onsets = alarm_onsets(df, s)
-        for i, a in enumerate(onsets[:MAX_ALARM_LINES]):
-            shapes.append(
-                {
-                    "type": "line",
-                    "xref": "x",
-                    "yref": "paper",
-                    "x0": float(a),
-                    "x1": float(a),
-                    "y0": 0,
-                    "y1": 1,
-                    "line": {"color": ALARM_COLOR, "width": 1.2, "dash": "dash"},
-                    "name": "alarm onset",
-                    "showlegend": i == 0,
-                }
-            )
-        note = ""
-        if onsets.size > MAX_ALARM_LINES or len(windows) > MAX_FAULT_WINDOWS:
-            note = (
-                f" (marks capped: {min(onsets.size, MAX_ALARM_LINES)}/{onsets.size} alarm "
-                f"onsets, {min(len(windows), MAX_FAULT_WINDOWS)}/{len(windows)} fault windows)"
-            )
+            data.append(_flag_trace(df, t, fc))
+        shapes, note = _sensor_shapes(df, t, s)
         has_y2 = any(d["yaxis"] in ("y2", "y4") for d in data)
-        top = [0.42, 1.0] if has_y2 else [0.0, 1.0]
-        layout: dict[str, Any] = {
-            "title": {"text": _sensor_title(s) + note, "x": 0.01, "font": {"size": 15}},
-            "height": 470 if has_y2 else 340,
-            "margin": {"l": 70, "r": 60, "t": 40, "b": 90},
-            "template": "none",
-            "paper_bgcolor": "white",
-            "plot_bgcolor": "white",
-            "font": {"family": "system-ui, -apple-system, Segoe UI, Roboto, sans-serif"},
-            "hovermode": "x",
-            "legend": {
-                "orientation": "h",
-                "yref": "container",
-                "y": 0.0,
-                "yanchor": "bottom",
-                "x": 0,
-                "font": {"size": 12},
-            },
-            "xaxis": {
-                "title": {"text": "time [s]"},
-                "anchor": "y2" if has_y2 else "y",
-                "showgrid": True,
-                "gridcolor": "#e5e5e5",
-                "zeroline": False,
-            },
-            "yaxis": {
-                "title": {"text": "force [N]"},
-                "domain": top,
-                "showgrid": True,
-                "gridcolor": "#e5e5e5",
-                "zeroline": True,
-                "zerolinecolor": "#bbbbbb",
-            },
-            "yaxis3": {  # stance strip: 0/1 fills the top 1/12 of the force panel
-                "overlaying": "y",
-                "range": [-11, 1],
-                "visible": False,
-                "fixedrange": True,
-            },
-            "shapes": shapes,
-        }
-        if has_y2:
-            layout["yaxis2"] = {
-                "title": {"text": "fault [N]"},
-                "domain": [0.0, 0.34],
-                "showgrid": True,
-                "gridcolor": "#e5e5e5",
-                "zeroline": True,
-                "zerolinecolor": "#bbbbbb",
-            }
-            layout["yaxis4"] = {
-                "overlaying": "y2",
-                "side": "right",
-                "range": [-0.05, 1.6],
-                "tickvals": [0, 1],
-                "title": {"text": "flag"},
-                "showgrid": False,
-                "fixedrange": True,
-            }
+        layout = _sensor_layout(_sensor_title(s) + note, shapes, has_y2)
         for d in data:
             d["xaxis"] = "x"
         specs.append(
@@ -305,6 +176,153 @@ def sensor_figure_specs(
         )
     return specs
 
+
+def _contact_trace(df: pd.DataFrame, t: np.ndarray, cc: str, side: str) -> dict[str, Any]:
+    """Shaded strip of the planned stance of foot ``side`` (column ``cc``)."""
+    x, y = step_edges(t, df[cc].fillna(0).to_numpy().astype(float) > 0.5)
+    return {
+        "type": "scatter",
+        "mode": "lines",
+        "name": f"stance ({_SIDE_NAMES.get(side, side)} foot, planned)",
+        "x": _typed(x),
+        "y": _typed(y),
+        "yaxis": "y3",
+        "fill": "tozeroy",
+        "legendrank": 2000,
+        "fillcolor": CONTACT_SHADE,
+        "line": {"width": 0, "shape": "hv", "color": CONTACT_SHADE},
+        "hoverinfo": "skip",
+        "meta": {"signal": "contact", "column": cc},
+    }
+
+
+def _flag_trace(df: pd.DataFrame, t: np.ndarray, fc: str) -> dict[str, Any]:
+    """Step trace of the 0/1 flag column ``fc``."""
+    x, y = step_edges(t, df[fc].fillna(False).to_numpy().astype(bool))
+    return {
+        "type": "scatter",
+        "mode": "lines",
+        "name": "flag (0/1)",
+        "x": _typed(x),
+        "y": _typed(y),
+        "yaxis": "y4",
+        "line": {"color": SIGNAL_COLORS["flag"], "width": 1.2, "shape": "hv"},
+        "hovertemplate": "flag: %{y:.0f}<extra></extra>",
+        "meta": {"signal": "flag", "column": fc},
+    }
+
+
+def _sensor_shapes(df: pd.DataFrame, t: np.ndarray, s: str) -> tuple[list[dict[str, Any]], str]:
+    """Shaded injected-fault windows and dashed alarm-onset lines of sensor ``s`` (capped),
+    and a title note when the caps cut marks."""
+    shapes: list[dict[str, Any]] = []
+    fm = fault_mask(df, s)
+    windows = _intervals_from_mask(t, fm) if fm is not None and fm.any() else []
+    for i, (a, b) in enumerate(windows[:MAX_FAULT_WINDOWS]):
+        shapes.append(
+            {
+                "type": "rect",
+                "xref": "x",
+                "yref": "paper",
+                "x0": a,
+                "x1": b,
+                "y0": 0,
+                "y1": 1,
+                "fillcolor": FAULT_SHADE,
+                "line": {"width": 0},
+                "layer": "below",
+                "name": "injected fault",
+                "showlegend": i == 0,
+            }
+        )
+    onsets = alarm_onsets(df, s)
+    for i, a in enumerate(onsets[:MAX_ALARM_LINES]):
+        shapes.append(
+            {
+                "type": "line",
+                "xref": "x",
+                "yref": "paper",
+                "x0": float(a),
+                "x1": float(a),
+                "y0": 0,
+                "y1": 1,
+                "line": {"color": ALARM_COLOR, "width": 1.2, "dash": "dash"},
+                "name": "alarm onset",
+                "showlegend": i == 0,
+            }
+        )
+    note = ""
+    if onsets.size > MAX_ALARM_LINES or len(windows) > MAX_FAULT_WINDOWS:
+        note = (
+            f" (marks capped: {min(onsets.size, MAX_ALARM_LINES)}/{onsets.size} alarm "
+            f"onsets, {min(len(windows), MAX_FAULT_WINDOWS)}/{len(windows)} fault windows)"
+        )
+    return shapes, note
+
+
+def _sensor_layout(title: str, shapes: list[dict[str, Any]], has_y2: bool) -> dict[str, Any]:
+    """Layout of a sensor figure: force panel (with the stance strip) on top, fault and
+    flag panel below when ``has_y2``."""
+    top = [0.42, 1.0] if has_y2 else [0.0, 1.0]
+    layout: dict[str, Any] = {
+        "title": {"text": title, "x": 0.01, "font": {"size": 15}},
+        "height": 470 if has_y2 else 340,
+        "margin": {"l": 70, "r": 60, "t": 40, "b": 90},
+        "template": "none",
+        "paper_bgcolor": "white",
+        "plot_bgcolor": "white",
+        "font": {"family": "system-ui, -apple-system, Segoe UI, Roboto, sans-serif"},
+        "hovermode": "x",
+        "legend": {
+            "orientation": "h",
+            "yref": "container",
+            "y": 0.0,
+            "yanchor": "bottom",
+            "x": 0,
+            "font": {"size": 12},
+        },
+        "xaxis": {
+            "title": {"text": "time [s]"},
+            "anchor": "y2" if has_y2 else "y",
+            "showgrid": True,
+            "gridcolor": "#e5e5e5",
+            "zeroline": False,
+        },
+        "yaxis": {
+            "title": {"text": "force [N]"},
+            "domain": top,
+            "showgrid": True,
+            "gridcolor": "#e5e5e5",
+            "zeroline": True,
+            "zerolinecolor": "#bbbbbb",
+        },
+        "yaxis3": {  # stance strip: 0/1 fills the top 1/12 of the force panel
+            "overlaying": "y",
+            "range": [-11, 1],
+            "visible": False,
+            "fixedrange": True,
+        },
+        "shapes": shapes,
+    }
+    if has_y2:
+        layout["yaxis2"] = {
+            "title": {"text": "fault [N]"},
+            "domain": [0.0, 0.34],
+            "showgrid": True,
+            "gridcolor": "#e5e5e5",
+            "zeroline": True,
+            "zerolinecolor": "#bbbbbb",
+        }
+        layout["yaxis4"] = {
+            "overlaying": "y2",
+            "side": "right",
+            "range": [-0.05, 1.6],
+            "tickvals": [0, 1],
+            "title": {"text": "flag"},
+            "showgrid": False,
+            "fixedrange": True,
+        }
+    return layout
 
 def _polygons(spans: list[tuple[float, float]], y: float, half: float) -> tuple[list, list]:
     """Rectangles ``[a, b] x [y - half, y + half]`` as one ``fill='toself'`` path."""
@@ -329,7 +347,13 @@ def overview_figure_specs(df: pd.DataFrame, max_points: int = 2000) -> list[dict
     """
     t = _time(df)
     sensors = detect_sensors(df)
-    specs: list[dict[str, Any]] = []
+    specs = [_timeline_spec(df, t, sensors), _feet_spec(df, t, sensors, max_points)]
+    return [sp for sp in specs if sp is not None]
+
+
+def _timeline_spec(df: pd.DataFrame, t: np.ndarray, sensors: list[str]) -> dict[str, Any] | None:
+    """Detection timeline: per sensor, injected fault windows (shaded) and flag-on
+    episodes (bars); None if there is neither."""
     fx: list[Any] = []
     fy: list[Any] = []
     ax_: list[Any] = []
@@ -359,7 +383,7 @@ def overview_figure_specs(df: pd.DataFrame, max_points: int = 2000) -> list[dict
                      "name": "flag on", "hoverinfo": "x+name",
                      "meta": {"signal": "flag_episodes"}})
     if data:
-        specs.append({
+        return {
             "id": "fig-timeline", "sensor": "", "data": data, "n_traces": len(data),
             "layout": {
                 "title": {"text": "Detection timeline", "x": 0.01, "font": {"size": 15}},
@@ -375,9 +399,15 @@ def overview_figure_specs(df: pd.DataFrame, max_points: int = 2000) -> list[dict
                            "yanchor": "bottom"},
                 "hovermode": "closest",
             },
-        })
-    # Per-foot totals.
-    data = []
+        }
+    return None
+
+
+def _feet_spec(df: pd.DataFrame, t: np.ndarray, sensors: list[str],
+               max_points: int) -> dict[str, Any] | None:
+    """Per foot: VFS total, sum of the measured and of the true forces [N], whichever
+    are present; None if none is."""
+    data: list[dict[str, Any]] = []
     sides = [side for side in ("r", "l") if any(s[:1] == side for s in sensors)]
     for k, side in enumerate(sides):
         yaxis = "y" if k == 0 else f"y{k + 1}"
@@ -422,10 +452,9 @@ def overview_figure_specs(df: pd.DataFrame, max_points: int = 2000) -> list[dict
                 "title": {"text": f"{_SIDE_NAMES[side]} foot [N]"},
                 "domain": [max(top - h, 0.0), top], "showgrid": True, "gridcolor": "#e5e5e5",
             }
-        specs.append({"id": "fig-feet", "sensor": "", "data": data, "layout": layout,
-                      "n_traces": len(data)})
-    return specs
-
+        return {"id": "fig-feet", "sensor": "", "data": data, "layout": layout,
+                "n_traces": len(data)}
+    return None
 
 def _fmt(value: Any, digits: int = 2) -> str:
     if value is None:
@@ -548,7 +577,8 @@ def _metadata_html(df: pd.DataFrame, t: np.ndarray) -> str:
     )
 
 
-_CSS = """
+#: Page style shared by the HTML reports (this one and the campaign report).
+BASE_CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:0;color:#222;
 background:#fafafa}
 header{background:#1f2d3d;color:#fff;padding:14px 24px}
@@ -559,7 +589,9 @@ h2{font-size:16px;margin:22px 0 8px}
 table{border-collapse:collapse;font-size:13px;background:#fff}
 th,td{border:1px solid #ddd;padding:4px 8px;text-align:right;vertical-align:top}
 th{background:#f0f2f5}
-table.meta th,table.meta td{text-align:left}
+"""
+
+_CSS = BASE_CSS + """table.meta th,table.meta td{text-align:left}
 table.meta{width:100%}
 table.meta th{width:150px}
 .kvs{display:flex;flex-wrap:wrap;gap:2px 14px}

@@ -44,6 +44,7 @@ from grfguard.model.kinematics import quat_to_rotation, rotation_to_quat
 from grfguard.model.loader import KV_OVER_KP, LoadedRobot
 from grfguard.sim.config import GaitConfig, NoiseConfig
 from grfguard.sim.pattern import _feet, _right_load_share, preview_control
+from grfguard.sim.simulate import _small_rotation
 
 __all__ = ["WholeBodyPlan", "scaled_gait", "plan_wholebody", "simulate_robot",
            "SAMPLE_RATE", "decimate"]
@@ -507,7 +508,7 @@ def _columns(robot, plan, phys, index, noise: NoiseConfig, seed: int) -> dict[st
     quat = P("imu_quat").copy()
     if noise.attitude_sigma > 0 or noise.attitude_bias_sigma > 0:
         rv = att_bias + draw(noise.attitude_sigma, (n_t, 3))
-        quat = rotation_to_quat(quat_to_rotation(quat) @ _rotvec_matrix(rv))
+        quat = rotation_to_quat(quat_to_rotation(quat) @ _small_rotation(rv))
     quat = quat * np.where(quat[:, :1] < 0, -1.0, 1.0)
     for i, ax in enumerate("xyz"):
         cols[f"imu_acc_{ax}"] = acc[:, i]
@@ -558,15 +559,3 @@ def _columns(robot, plan, phys, index, noise: NoiseConfig, seed: int) -> dict[st
         cols[f"true_contact_{s}"] = (fz > 0.0).astype(np.int64)
     cols["true_trunk_tilt"] = _tilt_deg(bq)
     return cols
-
-
-def _rotvec_matrix(rotvec: np.ndarray) -> np.ndarray:
-    theta = np.linalg.norm(rotvec, axis=1)
-    safe = np.where(theta > 0, theta, 1.0)
-    k = rotvec / safe[:, None]
-    K = np.zeros((rotvec.shape[0], 3, 3))
-    K[:, 0, 1], K[:, 0, 2] = -k[:, 2], k[:, 1]
-    K[:, 1, 0], K[:, 1, 2] = k[:, 2], -k[:, 0]
-    K[:, 2, 0], K[:, 2, 1] = -k[:, 1], k[:, 0]
-    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
