@@ -111,3 +111,23 @@ def test_cli_run_on_a_g1_log(tmp_path, g1) -> None:
     tab = evaluate_detection(out)
     assert tab.loc["l2", "detected"] and tab.loc["l2", "delay_s"] <= 0.5
     assert not any(out[f"flag_{s}"].any() for s in SENSOR_NAMES if s != "l2")
+
+
+def test_cli_calibrate_then_run_on_g1_logs(tmp_path, g1) -> None:
+    """`grfguard calibrate` on a fault-free G1 log (another seed), then `run --thresholds`."""
+    write_log(simulate_robot(g1, scaled_gait(g1, duration=8.0), NoiseConfig(), seed=11),
+              tmp_path / "clean.parquet")
+    runner = CliRunner()
+    r = runner.invoke(app, ["calibrate", str(tmp_path / "clean.parquet"),
+                            "-o", str(tmp_path / "th.toml")])
+    assert r.exit_code == 0, r.output
+    assert "total_sigma" in (tmp_path / "th.toml").read_text()
+    walk = simulate_robot(g1, scaled_gait(g1, duration=7.0), NoiseConfig(), seed=12)
+    write_log(inject_faults(walk, [f"r3=offset:{-0.09 * _weight(g1):.2f}@4"], seed=0),
+              tmp_path / "f.parquet")
+    r = runner.invoke(app, ["run", str(tmp_path / "f.parquet"), "--thresholds",
+                            str(tmp_path / "th.toml"), "-o", str(tmp_path / "out.parquet")])
+    assert r.exit_code == 0, r.output
+    tab = evaluate_detection(read_log(tmp_path / "out.parquet"))
+    assert tab.loc["r3", "detected"] and tab.loc["r3", "kind_estimated"] == "offset"
+    assert tab["false_alarms"].sum() == 0

@@ -115,3 +115,23 @@ def test_shipped_channel_config_is_checked() -> None:
 
     with pytest.raises(ConfigError, match="channels"):
         ChannelConfig.from_toml_text("[channels]\nh = 3.0\n")
+
+
+def test_cli_run_on_a_talos_log(tmp_path, talos) -> None:
+    from typer.testing import CliRunner
+
+    from grfguard.cli import app
+    from grfguard.io.logio import read_log, write_log
+
+    df = simulate_robot(talos, scaled_gait(talos, duration=8.0), NoiseConfig(), seed=4)
+    wt = 0.09 * _scales(talos)[1]
+    df.loc[df["time"] >= 3.0, "ft_l_tx"] += wt
+    write_log(df, tmp_path / "talos.parquet")
+    r = CliRunner().invoke(app, ["run", str(tmp_path / "talos.parquet"),
+                                 "-o", str(tmp_path / "out.parquet")])
+    assert r.exit_code == 0, r.output
+    out = read_log(tmp_path / "out.parquet")
+    flagged = [ch for ch in CHANNELS if out[f"flag_{ch}"].any()]
+    assert flagged == ["ft_l_tx"]
+    assert out.loc[out["flag_ft_l_tx"], "time"].min() - 3.0 <= 0.5
+    assert out["kind_ft_l_tx"].iloc[-1] == "offset"

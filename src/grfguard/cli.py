@@ -404,6 +404,9 @@ def calibrate(
     frames = [load_log(p) for p in logs]
     for p, f in zip(logs, frames, strict=True):
         robot_for_log(f, rob, str(p))
+    from grfguard.estimate.described import calibration_frames
+
+    frames = calibration_frames(frames)  # described robots: their virtual sensor (issue 9)
     total_s = sum(float(f["time"].iloc[-1] - f["time"].iloc[0]) for f in frames)
     if total_s < _MIN_CALIBRATION_S:
         from grfguard.errors import LogFormatError

@@ -27,6 +27,7 @@ from grfguard.model.description import SIDES
 
 __all__ = [
     "described_robot",
+    "calibration_frames",
     "described_thresholds",
     "is_described",
     "run_described",
@@ -159,3 +160,22 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd
     raise LogFormatError(
         f"the monitor does not watch {sensing!r} sensing (robot {name!r}); 'corners' and "
         "'ft' are supported")
+
+
+def calibration_frames(frames: list[pd.DataFrame]) -> list[pd.DataFrame]:
+    """Logs for :func:`~grfguard.detect.calibrate.calibrate_thresholds`: a described
+    corner-cell robot's logs get their virtual-sensor columns; others pass unchanged.
+
+    Raises:
+        LogFormatError: A log of an ankle F/T robot (its channels are calibrated by
+            :func:`grfguard.detect.channels.calibrate_channels`).
+    """
+    out = []
+    for f in frames:
+        if is_described(f) and f.attrs.get("sensing") == "ft":
+            raise LogFormatError(
+                f"robot {f.attrs.get('robot_name')!r} has ankle F/T sensors: its channel "
+                "thresholds come from grfguard.detect.channels.calibrate_channels (see "
+                "benchmarks/calibrate_described_thresholds.py), not from the corner detector")
+        out.append(with_described_vfs(f) if is_described(f) else f)
+    return out
