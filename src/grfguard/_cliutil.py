@@ -215,10 +215,11 @@ def check_thresholds_toml(path: str | Path, option: str = "--thresholds") -> Any
     known = _field_names(Thresholds)
     if "thresholds" in doc:
         _check_table(doc, "thresholds", lead, known)
-        extra = sorted(set(doc) - {"thresholds"})
+        extra = sorted(set(doc) - {"thresholds", "model_corrections"})
         if extra:
             raise ConfigError(f"{lead}: unknown top-level key(s) {extra}; only a [thresholds] "
-                              "table is allowed")
+                              "table and the [model_corrections] of `grfguard calibrate "
+                              "--model` are allowed")
     else:
         _check_keys(doc, lead, "the file", known)
     _warn_disabled(doc.get("thresholds", doc), lead)
