@@ -9,14 +9,6 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
-try:
-    import importlib.metadata as _md
-
-    _md.distribution("example-robot-data")
-except Exception:  # pragma: no cover
-    pytest.skip("example-robot-data not installed (pip install 'grfguard[robots]')",
-                allow_module_level=True)
-
 from typer.testing import CliRunner  # noqa: E402
 
 from grfguard.cli import app  # noqa: E402

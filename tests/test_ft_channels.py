@@ -11,14 +11,6 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-try:
-    import importlib.metadata as _md
-
-    _md.distribution("example-robot-data")
-except Exception:  # pragma: no cover
-    pytest.skip("example-robot-data not installed (pip install 'grfguard[robots]')",
-                allow_module_level=True)
-
 from grfguard.detect.channels import channel_valid_mask  # noqa: E402
 from grfguard.errors import ConfigError  # noqa: E402
 from grfguard.estimate.described import run_described, with_described_vfs  # noqa: E402

@@ -18,14 +18,6 @@ from grfguard.model.loader import load_model  # noqa: E402
 from grfguard.sim.config import NoiseConfig  # noqa: E402
 from grfguard.sim.wholebody import decimate, scaled_gait, simulate_robot  # noqa: E402
 
-try:
-    import importlib.metadata as _md
-
-    _md.distribution("example-robot-data")
-except Exception:  # pragma: no cover
-    pytest.skip("example-robot-data not installed (pip install 'grfguard[robots]')",
-                allow_module_level=True)
-
 
 @pytest.fixture(scope="module")
 def talos():
