@@ -29,7 +29,7 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector, DetectorInputs
 from grfguard.detect.paper import PaperDetector
-from grfguard.detect.system import CommonModeConfig, CommonModeMonitor
+from grfguard.detect.system import CommonModeConfig, CommonModeMonitor, SwingZeroLearner
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
 from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
@@ -136,9 +136,11 @@ class Monitor:
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
         self.common: CommonModeMonitor | None = None
+        self.zeros: SwingZeroLearner | None = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
+            self.zeros = SwingZeroLearner(robot, self.config.dt_s)
         self.reset()
 
     @classmethod
@@ -181,6 +183,8 @@ class Monitor:
         self.continuity.reset()
         if self.common is not None:
             self.common.reset()
+        if self.zeros is not None:
+            self.zeros.reset()
         self._spike = [False] * len(SENSOR_NAMES)
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
@@ -245,14 +249,21 @@ class Monitor:
                  for ce, cr in zip(p.cest, p.cref, strict=True)]
         if not all(math.isfinite(q) for q in p.v):
             valid = [False, False]
-        frozen = any(s.flag for s in self.detector.sensors)
-        cm = self.common.update(p.x, p.v, valid, frozen=frozen)
+        flags = [s.flag for s in self.detector.sensors]
+        frozen = any(flags)
+        x = p.x
+        if self.zeros is not None:
+            contact = [(cr > 0.5) or (ce > 0.5)
+                       for ce, cr in zip(p.cest, p.cref, strict=True)]
+            z = self.zeros.update(p.x, p.tot, contact, flags)
+            x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        cm = self.common.update(x, p.v, valid, frozen=frozen)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
-        out = self._step(p.clock, p.x, v, tot, p.cref, p.cest)
+        out = self._step(p.clock, x, v, tot, p.cref, p.cest)
         out["model_mismatch"] = cm.model_mismatch
         out["model_mismatch_reason"] = cm.reason
         return out

@@ -35,7 +35,10 @@ import numpy as np
 from grfguard._validate import check_number
 from grfguard.model.robot import SURALP, RobotConfig
 
-__all__ = ["CommonModeConfig", "CommonModeMonitor", "CommonModeResult"]
+__all__ = [
+    "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
+    "SwingZeroLearner",
+]
 
 
 @dataclass(frozen=True)
@@ -203,6 +206,114 @@ class CommonModeMonitor:
         if not reasons:  # no evidence against the model: leave the virtual forces alone
             corr = np.zeros(8)
         return CommonModeResult(corr, bool(reasons), "; ".join(reasons), ratio, shift)
+
+
+# ------------------------------------------------------------------ load-cell zeros
+@dataclass(frozen=True)
+class SwingZeroConfig:
+    """Settings of :class:`SwingZeroLearner`.
+
+    Attributes:
+        settle_s: Swing time skipped after lift-off before the zeros are learned [s].
+        learn_s: Swing time (after ``settle_s``) per foot over which the zeros are
+            averaged; afterwards they are frozen (a later drift is not absorbed) [s].
+        apply_after_s: Learned swing time before a zero is subtracted [s].
+        limit_n: A swing reading whose running mean is beyond this [N] is a fault (left
+            to the swing test), not a zero: it is not learned.
+        deadband_n: A learned zero smaller than this [N] is not applied (on a sensor
+            without zero error the monitor sees the plain readings).
+        swing_load_fraction: The foot is in swing when its virtual load is below this
+            fraction of the weight (and contact is neither planned nor estimated).
+    """
+
+    settle_s: float = 0.1
+    learn_s: float = 1.0
+    apply_after_s: float = 0.3
+    limit_n: float = 20.0
+    deadband_n: float = 3.0
+    swing_load_fraction: float = 0.02
+
+    def __post_init__(self) -> None:
+        o = "swing_zero"
+        check_number(o, "settle_s", self.settle_s, 0.0, 10.0, "s")
+        check_number(o, "learn_s", self.learn_s, 0.0, 600.0, "s")
+        check_number(o, "apply_after_s", self.apply_after_s, 0.0, 600.0, "s")
+        check_number(o, "limit_n", self.limit_n, 0.0, 1e4, "N")
+        check_number(o, "deadband_n", self.deadband_n, 0.0, 1e4, "N")
+        check_number(o, "swing_load_fraction", self.swing_load_fraction, 0.0, 1.0, "")
+
+
+class SwingZeroLearner:
+    """Learns each load cell's zero from the first swings (a swing foot carries nothing,
+    so its readings are the zeros) and returns it for subtraction from the readings.
+
+    Per foot, samples count once the foot has been in swing for ``settle_s``; the zero of
+    a sensor is the mean of its first ``learn_s`` of such samples (the sensor not flagged
+    and the running mean within ``limit_n``), then frozen. A zero is returned once
+    ``apply_after_s`` of swing has been averaged and when it exceeds ``deadband_n``.
+
+    Args:
+        robot: Robot description (weight).
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(
+        self, robot: RobotConfig = SURALP, dt_s: float = 0.001,
+        config: SwingZeroConfig | None = None,
+    ) -> None:
+        self.robot = robot
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else SwingZeroConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the zeros."""
+        self._sum = np.zeros(8)
+        self._n = np.zeros(8)
+        self._swing_s = np.zeros(2)
+
+    @property
+    def zeros_n(self) -> np.ndarray:
+        """(8,) zeros applied now [N] (0 where not learned or within the deadband)."""
+        c = self.config
+        z = np.divide(self._sum, self._n, out=np.zeros(8), where=self._n > 0)
+        ready = self._n * self.dt_s >= c.apply_after_s
+        return np.where(ready & (np.abs(z) > c.deadband_n) & (np.abs(z) <= c.limit_n), z, 0.0)
+
+    def update(
+        self,
+        measured: Sequence[float],
+        foot_load_n: Sequence[float],
+        in_contact: Sequence[bool],
+        flagged: Sequence[bool],
+    ) -> np.ndarray:
+        """One sample; returns :attr:`zeros_n` (never raises on bad numbers).
+
+        Args:
+            measured: (8,) raw readings [N] (NaN skipped).
+            foot_load_n: Virtual load of each foot (right, left) [N].
+            in_contact: Per foot: contact planned or estimated.
+            flagged: (8,) the sensor is flagged.
+        """
+        c = self.config
+        m = np.asarray(measured, dtype=float)
+        max_n = c.learn_s / self.dt_s
+        for f in range(2):
+            load = float(foot_load_n[f])
+            swing = (not bool(in_contact[f])) and math.isfinite(load) and (
+                load < c.swing_load_fraction * self.robot.weight)
+            self._swing_s[f] = self._swing_s[f] + self.dt_s if swing else 0.0
+            if self._swing_s[f] <= c.settle_s:
+                continue
+            for i in range(4 * f, 4 * f + 4):
+                if flagged[i] or not math.isfinite(m[i]) or self._n[i] >= max_n:
+                    continue
+                if abs((self._sum[i] + m[i]) / (self._n[i] + 1)) > c.limit_n:
+                    continue
+                self._sum[i] += m[i]
+                self._n[i] += 1
+        return self.zeros_n
 
 
 # ---------------------------------------------------------------------------- wiring
