@@ -29,11 +29,16 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector, DetectorInputs
 from grfguard.detect.paper import PaperDetector
-from grfguard.detect.system import CommonModeConfig, CommonModeMonitor, SwingZeroLearner
+from grfguard.detect.system import (
+    CommonModeConfig,
+    CommonModeMonitor,
+    GyroBiasLearner,
+    SwingZeroLearner,
+)
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
 from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
-from grfguard.io.schema import TIME, force_col, vfs_col
+from grfguard.io.schema import IMU_GYRO, TIME, ZMP_REF, force_col, vfs_col
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
 from grfguard.recover.recovery import RecoverTuning, Recovery
 
@@ -137,10 +142,12 @@ class Monitor:
         self.continuity = Continuity(self.guard.settle_s)
         self.common: CommonModeMonitor | None = None
         self.zeros: SwingZeroLearner | None = None
+        self.gyro_bias: GyroBiasLearner | None = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
             self.zeros = SwingZeroLearner(robot, self.config.dt_s)
+            self.gyro_bias = GyroBiasLearner(self.config.dt_s)
         self.reset()
 
     @classmethod
@@ -185,6 +192,10 @@ class Monitor:
             self.common.reset()
         if self.zeros is not None:
             self.zeros.reset()
+        if self.gyro_bias is not None:
+            self.gyro_bias.reset()
+        self._bias_now: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._bias_rows: np.ndarray | None = None
         self._spike = [False] * len(SENSOR_NAMES)
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
@@ -264,8 +275,18 @@ class Monitor:
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
         out = self._step(p.clock, x, v, tot, p.cref, p.cest)
-        out["model_mismatch"] = cm.model_mismatch
-        out["model_mismatch_reason"] = cm.reason
+        reasons = [cm.reason] if cm.reason else []
+        if self.gyro_bias is not None and any(self._bias_now):
+            bx, by, bz = self._bias_now
+            reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
+        if self.zeros is not None:
+            zs = self.zeros.zeros_n
+            if zs.any():
+                reasons.append("load-cell zeros removed (" + ", ".join(
+                    f"{n} {q:+.0f} N" for n, q in zip(SENSOR_NAMES, zs, strict=True)
+                    if q != 0.0) + ")")
+        out["model_mismatch"] = bool(reasons)
+        out["model_mismatch_reason"] = "; ".join(reasons)
         return out
 
     def _finish(self, res: dict[str, Any], p: _Prepared) -> dict[str, Any]:
@@ -301,6 +322,9 @@ class Monitor:
             row = {}
         t_raw = _f(row, TIME)
         clean, reason = self.inputs.clean_row(row)
+        if self.gyro_bias is not None:
+            clean = dict(clean)
+            self._unbias_row(clean)
         clock, tstate, jump = self.time_guard.step(t_raw)
         reset = self.continuity.before(tstate)
         if reset and self.vfs is not None:
@@ -324,6 +348,44 @@ class Monitor:
         res = self._finish(self._detect(p), p)
         out: dict[str, Any] = dict(vout)
         out.update(res)
+        return out
+
+    def _unbias_row(self, clean: dict[str, Any]) -> None:
+        """Subtract the learned gyro bias from one cleaned row (in place)."""
+        assert self.gyro_bias is not None
+        if not all(c in clean for c in IMU_GYRO):
+            return
+        b = self.gyro_bias.update(
+            [_f(clean, c) for c in IMU_GYRO],
+            [_f(clean, f"contact_ref_{s}") for s in SIDES],
+            [_f(clean, c) for c in ZMP_REF],
+        )
+        self._bias_now = b
+        for c, q in zip(IMU_GYRO, b, strict=True):
+            if q != 0.0:
+                clean[c] = _f(clean, c) - q
+
+    def _unbias_frame(self, clean: pd.DataFrame) -> pd.DataFrame:
+        """The learned gyro bias subtracted from the cleaned log (same numbers as
+        :meth:`_unbias_row` row by row)."""
+        assert self.gyro_bias is not None
+        n = len(clean)
+
+        def col(c: str) -> np.ndarray:
+            if c in clean:
+                return pd.to_numeric(clean[c], errors="coerce").to_numpy(dtype=float)
+            return np.full(n, np.nan)
+
+        g = np.column_stack([col(c) for c in IMU_GYRO])
+        cr = np.column_stack([col(f"contact_ref_{s}") for s in SIDES])
+        zr = np.column_stack([col(c) for c in ZMP_REF])
+        bias = np.array([self.gyro_bias.update(g[k], cr[k], zr[k]) for k in range(n)])
+        self._bias_rows = bias.reshape(n, 3)
+        if not bias.any():
+            return clean
+        out = clean.copy()
+        for j, c in enumerate(IMU_GYRO):
+            out[c] = g[:, j] - bias[:, j]
         return out
 
     def _valid(self, flag: float, v: list[float], tot: list[float]) -> bool:
@@ -414,6 +476,8 @@ class Monitor:
         self.reset()
         n = len(log)
         clean, reasons = self.inputs.clean_frame(log)
+        if self.gyro_bias is not None and all(c in clean for c in IMU_GYRO):
+            clean = self._unbias_frame(clean)
         t_raw = pd.to_numeric(log[TIME], errors="coerce").to_numpy(dtype=float).tolist()
         times = [self.time_guard.step(t) for t in t_raw]
         resets = np.zeros(n, dtype=bool)
@@ -454,7 +518,11 @@ class Monitor:
             cols = list(pres)
             rows = [{c: pres[c][k] for c in cols} for k in range(n)]
         else:
-            rows = [self._detect(p) for p in prepared]
+            rows = []
+            for k, p in enumerate(prepared):
+                if self._bias_rows is not None:
+                    self._bias_now = tuple(float(q) for q in self._bias_rows[k])
+                rows.append(self._detect(p))
         rows = [self._finish(r, p) for r, p in zip(rows, prepared, strict=True)]
         res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)
         out = log.copy()

@@ -37,7 +37,7 @@ from grfguard.model.robot import SURALP, RobotConfig
 
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
-    "SwingZeroLearner",
+    "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner",
 ]
 
 
@@ -314,6 +314,96 @@ class SwingZeroLearner:
                 self._sum[i] += m[i]
                 self._n[i] += 1
         return self.zeros_n
+
+
+# ------------------------------------------------------------------ gyro bias
+@dataclass(frozen=True)
+class GyroBiasConfig:
+    """Settings of :class:`GyroBiasLearner`.
+
+    Attributes:
+        learn_s: Standing time over which the gyro readings are averaged, then frozen [s].
+        apply_after_s: Averaged standing time before the bias is subtracted [s].
+        still_rad_s: A sample counts only when every gyro axis is below this [rad/s].
+        deadband_rad_s: A bias smaller than this on every axis is not applied (on an
+            unbiased gyro the virtual sensor sees the plain readings) [rad/s].
+    """
+
+    learn_s: float = 1.5
+    apply_after_s: float = 0.5
+    still_rad_s: float = 0.1
+    deadband_rad_s: float = 0.01
+
+    def __post_init__(self) -> None:
+        o = "gyro_bias"
+        check_number(o, "learn_s", self.learn_s, 0.0, 600.0, "s")
+        check_number(o, "apply_after_s", self.apply_after_s, 0.0, 600.0, "s")
+        check_number(o, "still_rad_s", self.still_rad_s, 0.0, 10.0, "rad/s")
+        check_number(o, "deadband_rad_s", self.deadband_rad_s, 0.0, 10.0, "rad/s")
+
+
+class GyroBiasLearner:
+    """Learns the gyro bias while the robot stands still (both feet planned in contact,
+    the ZMP reference at rest, the gyro quiet): the body does not rotate, so the mean
+    reading is the bias. The first ``learn_s`` of such samples are averaged, then the
+    bias is frozen; it is returned (for subtraction from the gyro readings before the
+    virtual sensor) once ``apply_after_s`` has been averaged and when it exceeds
+    ``deadband_rad_s`` on some axis.
+
+    Args:
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(self, dt_s: float = 0.001, config: GyroBiasConfig | None = None) -> None:
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else GyroBiasConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the bias."""
+        self._sum = [0.0, 0.0, 0.0]
+        self._n = 0
+        self._zmp_prev = (math.nan, math.nan)
+
+    @property
+    def bias_rad_s(self) -> tuple[float, float, float]:
+        """The bias applied now [rad/s] (zeros before ``apply_after_s`` or within the
+        deadband)."""
+        c = self.config
+        if self._n == 0 or self._n * self.dt_s < c.apply_after_s:
+            return (0.0, 0.0, 0.0)
+        b = tuple(q / self._n for q in self._sum)
+        if max(abs(q) for q in b) <= c.deadband_rad_s:
+            return (0.0, 0.0, 0.0)
+        return b  # type: ignore[return-value]
+
+    def update(
+        self, gyro: Sequence[float], contact_ref: Sequence[float], zmp_ref: Sequence[float],
+    ) -> tuple[float, float, float]:
+        """One sample; returns :attr:`bias_rad_s` (never raises on bad numbers).
+
+        Args:
+            gyro: (3,) gyro reading [rad/s].
+            contact_ref: Planned contact per foot (0/1, NaN unknown).
+            zmp_ref: Planned ZMP (x, y) [m] (NaN when the log has none).
+        """
+        c = self.config
+        zr = (float(zmp_ref[0]), float(zmp_ref[1]))
+        rest = not any(
+            math.isfinite(a) and math.isfinite(b) and abs(a - b) > 1e-6
+            for a, b in zip(zr, self._zmp_prev, strict=True)
+        )
+        self._zmp_prev = zr
+        g = [float(q) for q in gyro]
+        still = (
+            rest and all(math.isfinite(q) and q > 0.5 for q in contact_ref)
+            and all(math.isfinite(q) and abs(q) < c.still_rad_s for q in g)
+        )
+        if still and self._n * self.dt_s < c.learn_s:
+            self._sum = [a + b for a, b in zip(self._sum, g, strict=True)]
+            self._n += 1
+        return self.bias_rad_s
 
 
 # ---------------------------------------------------------------------------- wiring
