@@ -33,14 +33,25 @@ from grfguard.detect.system import (
     CommonModeConfig,
     CommonModeMonitor,
     GyroBiasLearner,
+    ImuTiltLearner,
     SwingZeroLearner,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
 from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
-from grfguard.io.schema import IMU_GYRO, TIME, ZMP_REF, force_col, vfs_col
+from grfguard.io.schema import (
+    IMU_ACC,
+    IMU_GYRO,
+    IMU_QUAT,
+    JOINT_COLUMNS,
+    TIME,
+    ZMP_REF,
+    force_col,
+    vfs_col,
+)
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
 from grfguard.recover.recovery import RecoverTuning, Recovery
+from grfguard.rotations import quat_to_matrix, rotation_to_quat
 
 __all__ = ["Monitor"]
 
@@ -48,6 +59,21 @@ _NAN = float("nan")
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
+
+
+def _rotate_imu(row: dict[str, Any], C: np.ndarray) -> None:
+    """Express the IMU readings of ``row`` in the described IMU frame (in place):
+    ``R_WI <- R_WI C^T``, ``acc <- C acc``, ``gyro <- C gyro``."""
+    quat = np.array([_f(row, c) for c in IMU_QUAT])
+    if np.all(np.isfinite(quat)):
+        qc = rotation_to_quat(quat_to_matrix(quat) @ C.T)
+        qc = qc * (-1.0 if qc[0] < 0 else 1.0)
+        for c, val in zip(IMU_QUAT, qc, strict=True):
+            row[c] = float(val)
+    for cols in (IMU_ACC, IMU_GYRO):
+        vec = C @ np.array([_f(row, c) for c in cols])
+        for c, val in zip(cols, vec, strict=True):
+            row[c] = float(val)
 
 
 def _f(row: Mapping[str, Any], key: str) -> float:
@@ -143,11 +169,16 @@ class Monitor:
         self.common: CommonModeMonitor | None = None
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
+        self.tilt: ImuTiltLearner | None = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
             self.zeros = SwingZeroLearner(robot, self.config.dt_s)
             self.gyro_bias = GyroBiasLearner(self.config.dt_s)
+            kin = getattr(vfs, "kin", None)
+            if kin is not None and hasattr(kin, "forward"):
+                self.tilt = ImuTiltLearner(kin, self.config.dt_s, learn_s=0.2,
+                                           apply_after_s=0.1, every_n=5)
         self.reset()
 
     @classmethod
@@ -194,8 +225,14 @@ class Monitor:
             self.zeros.reset()
         if self.gyro_bias is not None:
             self.gyro_bias.reset()
+        if self.tilt is not None:
+            self.tilt.reset()
         self._bias_now: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._bias_rows: np.ndarray | None = None
+        self._tilt_now: tuple[float, ...] = (0.0, 0.0)
+        self._tilt_seen: tuple[float, ...] = (0.0, 0.0)
+        self._tilt_rows: np.ndarray | None = None
+        self._eye = self.tilt.rotation if self.tilt is not None else None
         self._spike = [False] * len(SENSOR_NAMES)
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
@@ -268,6 +305,9 @@ class Monitor:
                        for ce, cr in zip(p.cest, p.cref, strict=True)]
             z = self.zeros.update(p.x, p.tot, contact, flags)
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
+            self._tilt_seen = self._tilt_now
+            self.common.reset()
         cm = self.common.update(x, p.v, valid, frozen=frozen)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
@@ -279,6 +319,9 @@ class Monitor:
         if self.gyro_bias is not None and any(self._bias_now):
             bx, by, bz = self._bias_now
             reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
+        if any(self._tilt_now):
+            reasons.append("IMU mounting tilt (roll {:+.1f}, pitch {:+.1f}) deg removed".format(
+                *self._tilt_now))
         if self.zeros is not None:
             zs = self.zeros.zeros_n
             if zs.any():
@@ -364,6 +407,13 @@ class Monitor:
         for c, q in zip(IMU_GYRO, b, strict=True):
             if q != 0.0:
                 clean[c] = _f(clean, c) - q
+        if self.tilt is not None:
+            C = self.tilt.update(
+                np.array([_f(clean, c) for c in JOINT_COLUMNS]),
+                np.array([_f(clean, c) for c in IMU_QUAT]), self.gyro_bias.still)
+            self._tilt_now = self.tilt.tilt_deg() if C is not self._eye else (0.0, 0.0)
+            if C is not self._eye:
+                _rotate_imu(clean, C)
 
     def _unbias_frame(self, clean: pd.DataFrame) -> pd.DataFrame:
         """The learned gyro bias subtracted from the cleaned log (same numbers as
@@ -379,13 +429,45 @@ class Monitor:
         g = np.column_stack([col(c) for c in IMU_GYRO])
         cr = np.column_stack([col(f"contact_ref_{s}") for s in SIDES])
         zr = np.column_stack([col(c) for c in ZMP_REF])
-        bias = np.array([self.gyro_bias.update(g[k], cr[k], zr[k]) for k in range(n)])
-        self._bias_rows = bias.reshape(n, 3)
-        if not bias.any():
+        bias = np.zeros((n, 3))
+        rots: list[np.ndarray] = []
+        tilts = np.zeros((n, 2))
+        q = np.column_stack([col(c) for c in JOINT_COLUMNS])
+        quat = np.column_stack([col(c) for c in IMU_QUAT])
+        for k in range(n):
+            bias[k] = self.gyro_bias.update(g[k], cr[k], zr[k])
+            if self.tilt is not None:
+                C = self.tilt.update(q[k], quat[k], self.gyro_bias.still)
+                rots.append(C)
+                if C is not self._eye:
+                    tilts[k] = self.tilt.tilt_deg()
+        self._bias_rows = bias
+        self._tilt_rows = tilts
+        rotated = any(C is not self._eye for C in rots)
+        if not bias.any() and not rotated:
             return clean
         out = clean.copy()
         for j, c in enumerate(IMU_GYRO):
             out[c] = g[:, j] - bias[:, j]
+        if rotated:
+            acc = np.column_stack([col(c) for c in IMU_ACC])
+            gy = np.column_stack([out[c].to_numpy(dtype=float) for c in IMU_GYRO])
+            Cs = np.stack(rots)
+            acc = np.einsum("kij,kj->ki", Cs, acc)
+            gy = np.einsum("kij,kj->ki", Cs, gy)
+            nan33 = np.full((3, 3), np.nan)
+            Rw = np.stack([quat_to_matrix(qq) if np.all(np.isfinite(qq)) else nan33
+                           for qq in quat])
+            Rw = np.einsum("kij,klj->kil", Rw, Cs)
+            qc = np.array([rotation_to_quat(R) if np.all(np.isfinite(R)) else np.full(4, np.nan)
+                           for R in Rw])
+            qc = qc * np.where(qc[:, :1] < 0, -1.0, 1.0)
+            for j, c in enumerate(IMU_ACC):
+                out[c] = acc[:, j]
+            for j, c in enumerate(IMU_GYRO):
+                out[c] = gy[:, j]
+            for j, c in enumerate(IMU_QUAT):
+                out[c] = qc[:, j]
         return out
 
     def _valid(self, flag: float, v: list[float], tot: list[float]) -> bool:
@@ -522,6 +604,8 @@ class Monitor:
             for k, p in enumerate(prepared):
                 if self._bias_rows is not None:
                     self._bias_now = tuple(float(q) for q in self._bias_rows[k])
+                if self._tilt_rows is not None:
+                    self._tilt_now = tuple(float(q) for q in self._tilt_rows[k])
                 rows.append(self._detect(p))
         rows = [self._finish(r, p) for r, p in zip(rows, prepared, strict=True)]
         res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)

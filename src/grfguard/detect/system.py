@@ -37,7 +37,7 @@ from grfguard.model.robot import SURALP, RobotConfig
 
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
-    "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner",
+    "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
 ]
 
 
@@ -365,6 +365,7 @@ class GyroBiasLearner:
         self._sum = [0.0, 0.0, 0.0]
         self._n = 0
         self._zmp_prev = (math.nan, math.nan)
+        self.still = False
 
     @property
     def bias_rad_s(self) -> tuple[float, float, float]:
@@ -400,10 +401,89 @@ class GyroBiasLearner:
             rest and all(math.isfinite(q) and q > 0.5 for q in contact_ref)
             and all(math.isfinite(q) and abs(q) < c.still_rad_s for q in g)
         )
+        self.still = bool(still)
         if still and self._n * self.dt_s < c.learn_s:
             self._sum = [a + b for a, b in zip(self._sum, g, strict=True)]
             self._n += 1
         return self.bias_rad_s
+
+
+# ------------------------------------------------------------------ IMU mounting tilt
+class ImuTiltLearner:
+    """Learns the IMU mounting tilt (roll, pitch) while the robot stands still: both soles
+    are flat on the ground then, so the sole normals the leg kinematics give from the IMU
+    attitude, mean over both feet and every ``every_n``-th standing sample of the first
+    ``learn_s``, are tilted by the mounting error. Returns the rotation ``C`` (IMU frame
+    as reported -> IMU frame as described) once ``apply_after_s`` has been averaged and the
+    tilt exceeds ``deadband_deg``; apply it as ``R_WI <- R_WI C^T``, ``acc <- C acc``,
+    ``gyro <- C gyro``.
+
+    Args:
+        kin: :class:`grfguard.estimate.kinematic.KinematicModel` of the robot.
+        dt_s: Sampling period in [s].
+    """
+
+    def __init__(self, kin, dt_s: float = 0.001, learn_s: float = 1.5,
+                 apply_after_s: float = 0.5, deadband_deg: float = 0.3,
+                 every_n: int = 10) -> None:
+        self.kin = kin
+        self.dt_s = float(dt_s)
+        self.learn_s = float(learn_s)
+        self.apply_after_s = float(apply_after_s)
+        self.deadband_deg = float(deadband_deg)
+        self.every_n = int(every_n)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the tilt."""
+        self._z = np.zeros(3)
+        self._n = 0
+        self._k = 0
+        self._C = np.eye(3)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) correction ``C`` applied now (identity when none)."""
+        return self._C
+
+    def tilt_deg(self) -> tuple[float, float]:
+        """Learned (roll, pitch) of the mounting in [deg]."""
+        if self._n == 0:
+            return (0.0, 0.0)
+        z = self._z / np.linalg.norm(self._z)
+        return (float(np.degrees(-z[1])), float(np.degrees(z[0])))
+
+    def update(self, q_rad: np.ndarray, quat_wxyz: np.ndarray, still: bool) -> np.ndarray:
+        """One sample; returns :attr:`rotation` (never raises on bad numbers)."""
+        if still and self._n * self.every_n * self.dt_s < self.learn_s:
+            self._k += 1
+            if self._k % self.every_n == 0 and np.all(np.isfinite(q_rad)) and np.all(
+                    np.isfinite(quat_wxyz)):
+                try:
+                    fr = self.kin.forward(np.asarray(q_rad, float), np.asarray(quat_wxyz, float))
+                    zs = fr.R_WS[:, :, 2].mean(axis=0)
+                except Exception:  # noqa: BLE001 - a bad sample is skipped
+                    zs = None
+                if zs is not None and np.all(np.isfinite(zs)):
+                    self._z += zs
+                    self._n += 1
+                    if self._n * self.every_n * self.dt_s >= self.apply_after_s:
+                        C = self._solve()
+                        if C is not None:
+                            self._C = C
+        return self._C
+
+    def _solve(self) -> np.ndarray | None:
+        z = self._z / np.linalg.norm(self._z)
+        ang = math.acos(float(np.clip(z[2], -1.0, 1.0)))
+        if math.degrees(ang) <= self.deadband_deg:
+            return None
+        # R maps e_z to z (minimal rotation): the mounting rotation up to yaw, C = R
+        axis = np.cross([0.0, 0.0, 1.0], z)
+        axis = axis / np.linalg.norm(axis)
+        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        R = np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K
+        return R
 
 
 # ---------------------------------------------------------------------------- wiring
