@@ -69,3 +69,15 @@ def test_learners_ignore_motion_and_faults() -> None:
         zs = z.update([100.0, 8.0, 0.0, 0.0, 0, 0, 0, 0], [0.0, 500.0], [False, True],
                       [False] * 8)
     assert zs[0] == 0.0 and zs[1] == pytest.approx(8.0) and zs[4] == 0.0
+
+
+def test_imu_mounting_tilt_is_learned_from_the_flat_soles() -> None:
+    log = simulate(gait=GaitConfig(duration=6.0), noise=NoiseConfig(), seed=0,
+                   reality=load_reality("imu_pitch"))  # 2 deg in pitch
+    plain = Monitor.for_log(log).run(log)
+    assert plain[FLAGS].any().all()  # without the option: every sensor flagged
+    out = Monitor.for_log(log, common_mode=True).run(log)
+    assert not out[FLAGS].any().any()
+    reason = out["model_mismatch_reason"].iloc[-1]
+    pitch = float(reason.split("pitch ")[1].split(")")[0])
+    assert abs(pitch - 2.0) < 0.3, reason

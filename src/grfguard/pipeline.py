@@ -231,6 +231,7 @@ class Monitor:
         self._bias_rows: np.ndarray | None = None
         self._tilt_now: tuple[float, ...] = (0.0, 0.0)
         self._tilt_seen: tuple[float, ...] = (0.0, 0.0)
+        self._tilt_settle_s = 0.0
         self._tilt_rows: np.ndarray | None = None
         self._eye = self.tilt.rotation if self.tilt is not None else None
         self._spike = [False] * len(SENSOR_NAMES)
@@ -307,6 +308,9 @@ class Monitor:
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
         if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
             self._tilt_seen = self._tilt_now
+            self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
+        if self._tilt_settle_s > 0.0:
+            self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
         cm = self.common.update(x, p.v, valid, frozen=frozen)
         v, tot = p.v, p.tot
