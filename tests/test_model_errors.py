@@ -81,3 +81,12 @@ def test_imu_mounting_tilt_is_learned_from_the_flat_soles() -> None:
     reason = out["model_mismatch_reason"].iloc[-1]
     pitch = float(reason.split("pitch ")[1].split(")")[0])
     assert abs(pitch - 2.0) < 0.3, reason
+    # the same numbers streamed (the tilt is applied row by row there)
+    head = log.iloc[:1500].copy()
+    head.attrs = dict(log.attrs)
+    mon = Monitor.for_log(head, common_mode=True)
+    batch = mon.run(head)
+    mon.reset()
+    stream = pd.DataFrame([mon.update(r) for r in head.to_dict("records")], index=head.index)
+    assert (batch["model_mismatch_reason"] == stream["model_mismatch_reason"]).all()
+    np.testing.assert_allclose(batch["vfs_r1"], stream["vfs_r1"], atol=1e-4, rtol=0)
