@@ -29,13 +29,29 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector, DetectorInputs
 from grfguard.detect.paper import PaperDetector
-from grfguard.detect.system import CommonModeConfig, CommonModeMonitor
+from grfguard.detect.system import (
+    CommonModeConfig,
+    CommonModeMonitor,
+    GyroBiasLearner,
+    ImuTiltLearner,
+    SwingZeroLearner,
+)
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
 from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
-from grfguard.io.schema import TIME, force_col, vfs_col
+from grfguard.io.schema import (
+    IMU_ACC,
+    IMU_GYRO,
+    IMU_QUAT,
+    JOINT_COLUMNS,
+    TIME,
+    ZMP_REF,
+    force_col,
+    vfs_col,
+)
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
 from grfguard.recover.recovery import RecoverTuning, Recovery
+from grfguard.rotations import quat_to_matrix, rotation_to_quat
 
 __all__ = ["Monitor"]
 
@@ -43,6 +59,21 @@ _NAN = float("nan")
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
+
+
+def _rotate_imu(row: dict[str, Any], C: np.ndarray) -> None:
+    """Express the IMU readings of ``row`` in the described IMU frame (in place):
+    ``R_WI <- R_WI C^T``, ``acc <- C acc``, ``gyro <- C gyro``."""
+    quat = np.array([_f(row, c) for c in IMU_QUAT])
+    if np.all(np.isfinite(quat)):
+        qc = rotation_to_quat(quat_to_matrix(quat) @ C.T)
+        qc = qc * (-1.0 if qc[0] < 0 else 1.0)
+        for c, val in zip(IMU_QUAT, qc, strict=True):
+            row[c] = float(val)
+    for cols in (IMU_ACC, IMU_GYRO):
+        vec = C @ np.array([_f(row, c) for c in cols])
+        for c, val in zip(cols, vec, strict=True):
+            row[c] = float(val)
 
 
 def _f(row: Mapping[str, Any], key: str) -> float:
@@ -136,9 +167,18 @@ class Monitor:
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
         self.common: CommonModeMonitor | None = None
+        self.zeros: SwingZeroLearner | None = None
+        self.gyro_bias: GyroBiasLearner | None = None
+        self.tilt: ImuTiltLearner | None = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
+            self.zeros = SwingZeroLearner(robot, self.config.dt_s)
+            self.gyro_bias = GyroBiasLearner(self.config.dt_s)
+            kin = getattr(vfs, "kin", None)
+            if kin is not None and hasattr(kin, "forward"):
+                self.tilt = ImuTiltLearner(kin, self.config.dt_s, learn_s=0.2,
+                                           apply_after_s=0.1, every_n=5)
         self.reset()
 
     @classmethod
@@ -181,6 +221,19 @@ class Monitor:
         self.continuity.reset()
         if self.common is not None:
             self.common.reset()
+        if self.zeros is not None:
+            self.zeros.reset()
+        if self.gyro_bias is not None:
+            self.gyro_bias.reset()
+        if self.tilt is not None:
+            self.tilt.reset()
+        self._bias_now: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._bias_rows: np.ndarray | None = None
+        self._tilt_now: tuple[float, ...] = (0.0, 0.0)
+        self._tilt_seen: tuple[float, ...] = (0.0, 0.0)
+        self._tilt_settle_s = 0.0
+        self._tilt_rows: np.ndarray | None = None
+        self._eye = self.tilt.rotation if self.tilt is not None else None
         self._spike = [False] * len(SENSOR_NAMES)
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
@@ -245,16 +298,42 @@ class Monitor:
                  for ce, cr in zip(p.cest, p.cref, strict=True)]
         if not all(math.isfinite(q) for q in p.v):
             valid = [False, False]
-        frozen = any(s.flag for s in self.detector.sensors)
-        cm = self.common.update(p.x, p.v, valid, frozen=frozen)
+        flags = [s.flag for s in self.detector.sensors]
+        frozen = any(flags)
+        x = p.x
+        if self.zeros is not None:
+            contact = [(cr > 0.5) or (ce > 0.5)
+                       for ce, cr in zip(p.cest, p.cref, strict=True)]
+            z = self.zeros.update(p.x, p.tot, contact, flags)
+            x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
+            self._tilt_seen = self._tilt_now
+            self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
+        if self._tilt_settle_s > 0.0:
+            self._tilt_settle_s -= self.config.dt_s
+            self.common.reset()
+        cm = self.common.update(x, p.v, valid, frozen=frozen)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
-        out = self._step(p.clock, p.x, v, tot, p.cref, p.cest)
-        out["model_mismatch"] = cm.model_mismatch
-        out["model_mismatch_reason"] = cm.reason
+        out = self._step(p.clock, x, v, tot, p.cref, p.cest)
+        reasons = [cm.reason] if cm.reason else []
+        if self.gyro_bias is not None and any(self._bias_now):
+            bx, by, bz = self._bias_now
+            reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
+        if any(self._tilt_now):
+            reasons.append("IMU mounting tilt (roll {:+.1f}, pitch {:+.1f}) deg removed".format(
+                *self._tilt_now))
+        if self.zeros is not None:
+            zs = self.zeros.zeros_n
+            if zs.any():
+                reasons.append("load-cell zeros removed (" + ", ".join(
+                    f"{n} {q:+.0f} N" for n, q in zip(SENSOR_NAMES, zs, strict=True)
+                    if q != 0.0) + ")")
+        out["model_mismatch"] = bool(reasons)
+        out["model_mismatch_reason"] = "; ".join(reasons)
         return out
 
     def _finish(self, res: dict[str, Any], p: _Prepared) -> dict[str, Any]:
@@ -290,6 +369,9 @@ class Monitor:
             row = {}
         t_raw = _f(row, TIME)
         clean, reason = self.inputs.clean_row(row)
+        if self.gyro_bias is not None:
+            clean = dict(clean)
+            self._unbias_row(clean)
         clock, tstate, jump = self.time_guard.step(t_raw)
         reset = self.continuity.before(tstate)
         if reset and self.vfs is not None:
@@ -313,6 +395,83 @@ class Monitor:
         res = self._finish(self._detect(p), p)
         out: dict[str, Any] = dict(vout)
         out.update(res)
+        return out
+
+    def _unbias_row(self, clean: dict[str, Any]) -> None:
+        """Subtract the learned gyro bias from one cleaned row (in place)."""
+        assert self.gyro_bias is not None
+        if not all(c in clean for c in IMU_GYRO):
+            return
+        b = self.gyro_bias.update(
+            [_f(clean, c) for c in IMU_GYRO],
+            [_f(clean, f"contact_ref_{s}") for s in SIDES],
+            [_f(clean, c) for c in ZMP_REF],
+        )
+        self._bias_now = b
+        for c, q in zip(IMU_GYRO, b, strict=True):
+            if q != 0.0:
+                clean[c] = _f(clean, c) - q
+        if self.tilt is not None:
+            C = self.tilt.update(
+                np.array([_f(clean, c) for c in JOINT_COLUMNS]),
+                np.array([_f(clean, c) for c in IMU_QUAT]), self.gyro_bias.still)
+            self._tilt_now = self.tilt.tilt_deg() if C is not self._eye else (0.0, 0.0)
+            if C is not self._eye:
+                _rotate_imu(clean, C)
+
+    def _unbias_frame(self, clean: pd.DataFrame) -> pd.DataFrame:
+        """The learned gyro bias subtracted from the cleaned log (same numbers as
+        :meth:`_unbias_row` row by row)."""
+        assert self.gyro_bias is not None
+        n = len(clean)
+
+        def col(c: str) -> np.ndarray:
+            if c in clean:
+                return pd.to_numeric(clean[c], errors="coerce").to_numpy(dtype=float)
+            return np.full(n, np.nan)
+
+        g = np.column_stack([col(c) for c in IMU_GYRO])
+        cr = np.column_stack([col(f"contact_ref_{s}") for s in SIDES])
+        zr = np.column_stack([col(c) for c in ZMP_REF])
+        bias = np.zeros((n, 3))
+        rots: list[np.ndarray] = []
+        tilts = np.zeros((n, 2))
+        q = np.column_stack([col(c) for c in JOINT_COLUMNS])
+        quat = np.column_stack([col(c) for c in IMU_QUAT])
+        for k in range(n):
+            bias[k] = self.gyro_bias.update(g[k], cr[k], zr[k])
+            if self.tilt is not None:
+                C = self.tilt.update(q[k], quat[k], self.gyro_bias.still)
+                rots.append(C)
+                if C is not self._eye:
+                    tilts[k] = self.tilt.tilt_deg()
+        self._bias_rows = bias
+        self._tilt_rows = tilts
+        rotated = any(C is not self._eye for C in rots)
+        if not bias.any() and not rotated:
+            return clean
+        out = clean.copy()
+        for j, c in enumerate(IMU_GYRO):
+            out[c] = g[:, j] - bias[:, j]
+        if rotated:
+            acc = np.column_stack([col(c) for c in IMU_ACC])
+            gy = np.column_stack([out[c].to_numpy(dtype=float) for c in IMU_GYRO])
+            Cs = np.stack(rots)
+            acc = np.einsum("kij,kj->ki", Cs, acc)
+            gy = np.einsum("kij,kj->ki", Cs, gy)
+            nan33 = np.full((3, 3), np.nan)
+            Rw = np.stack([quat_to_matrix(qq) if np.all(np.isfinite(qq)) else nan33
+                           for qq in quat])
+            Rw = np.einsum("kij,klj->kil", Rw, Cs)
+            qc = np.array([rotation_to_quat(R) if np.all(np.isfinite(R)) else np.full(4, np.nan)
+                           for R in Rw])
+            qc = qc * np.where(qc[:, :1] < 0, -1.0, 1.0)
+            for j, c in enumerate(IMU_ACC):
+                out[c] = acc[:, j]
+            for j, c in enumerate(IMU_GYRO):
+                out[c] = gy[:, j]
+            for j, c in enumerate(IMU_QUAT):
+                out[c] = qc[:, j]
         return out
 
     def _valid(self, flag: float, v: list[float], tot: list[float]) -> bool:
@@ -403,6 +562,8 @@ class Monitor:
         self.reset()
         n = len(log)
         clean, reasons = self.inputs.clean_frame(log)
+        if self.gyro_bias is not None and all(c in clean for c in IMU_GYRO):
+            clean = self._unbias_frame(clean)
         t_raw = pd.to_numeric(log[TIME], errors="coerce").to_numpy(dtype=float).tolist()
         times = [self.time_guard.step(t) for t in t_raw]
         resets = np.zeros(n, dtype=bool)
@@ -443,7 +604,13 @@ class Monitor:
             cols = list(pres)
             rows = [{c: pres[c][k] for c in cols} for k in range(n)]
         else:
-            rows = [self._detect(p) for p in prepared]
+            rows = []
+            for k, p in enumerate(prepared):
+                if self._bias_rows is not None:
+                    self._bias_now = tuple(float(q) for q in self._bias_rows[k])
+                if self._tilt_rows is not None:
+                    self._tilt_now = tuple(float(q) for q in self._tilt_rows[k])
+                rows.append(self._detect(p))
         rows = [self._finish(r, p) for r, p in zip(rows, prepared, strict=True)]
         res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)
         out = log.copy()

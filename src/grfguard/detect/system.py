@@ -35,7 +35,10 @@ import numpy as np
 from grfguard._validate import check_number
 from grfguard.model.robot import SURALP, RobotConfig
 
-__all__ = ["CommonModeConfig", "CommonModeMonitor", "CommonModeResult"]
+__all__ = [
+    "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
+    "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
+]
 
 
 @dataclass(frozen=True)
@@ -203,6 +206,284 @@ class CommonModeMonitor:
         if not reasons:  # no evidence against the model: leave the virtual forces alone
             corr = np.zeros(8)
         return CommonModeResult(corr, bool(reasons), "; ".join(reasons), ratio, shift)
+
+
+# ------------------------------------------------------------------ load-cell zeros
+@dataclass(frozen=True)
+class SwingZeroConfig:
+    """Settings of :class:`SwingZeroLearner`.
+
+    Attributes:
+        settle_s: Swing time skipped after lift-off before the zeros are learned [s].
+        learn_s: Swing time (after ``settle_s``) per foot over which the zeros are
+            averaged; afterwards they are frozen (a later drift is not absorbed) [s].
+        apply_after_s: Learned swing time before a zero is subtracted [s].
+        limit_n: A swing reading whose running mean is beyond this [N] is a fault (left
+            to the swing test), not a zero: it is not learned.
+        deadband_n: A learned zero smaller than this [N] is not applied (on a sensor
+            without zero error the monitor sees the plain readings).
+        swing_load_fraction: The foot is in swing when its virtual load is below this
+            fraction of the weight (and contact is neither planned nor estimated).
+    """
+
+    settle_s: float = 0.1
+    learn_s: float = 1.0
+    apply_after_s: float = 0.3
+    limit_n: float = 20.0
+    deadband_n: float = 3.0
+    swing_load_fraction: float = 0.02
+
+    def __post_init__(self) -> None:
+        o = "swing_zero"
+        check_number(o, "settle_s", self.settle_s, 0.0, 10.0, "s")
+        check_number(o, "learn_s", self.learn_s, 0.0, 600.0, "s")
+        check_number(o, "apply_after_s", self.apply_after_s, 0.0, 600.0, "s")
+        check_number(o, "limit_n", self.limit_n, 0.0, 1e4, "N")
+        check_number(o, "deadband_n", self.deadband_n, 0.0, 1e4, "N")
+        check_number(o, "swing_load_fraction", self.swing_load_fraction, 0.0, 1.0, "")
+
+
+class SwingZeroLearner:
+    """Learns each load cell's zero from the first swings (a swing foot carries nothing,
+    so its readings are the zeros) and returns it for subtraction from the readings.
+
+    Per foot, samples count once the foot has been in swing for ``settle_s``; the zero of
+    a sensor is the mean of its first ``learn_s`` of such samples (the sensor not flagged
+    and the running mean within ``limit_n``), then frozen. A zero is returned once
+    ``apply_after_s`` of swing has been averaged and when it exceeds ``deadband_n``.
+
+    Args:
+        robot: Robot description (weight).
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(
+        self, robot: RobotConfig = SURALP, dt_s: float = 0.001,
+        config: SwingZeroConfig | None = None,
+    ) -> None:
+        self.robot = robot
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else SwingZeroConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the zeros."""
+        self._sum = np.zeros(8)
+        self._n = np.zeros(8)
+        self._swing_s = np.zeros(2)
+
+    @property
+    def zeros_n(self) -> np.ndarray:
+        """(8,) zeros applied now [N] (0 where not learned or within the deadband)."""
+        c = self.config
+        z = np.divide(self._sum, self._n, out=np.zeros(8), where=self._n > 0)
+        ready = self._n * self.dt_s >= c.apply_after_s
+        return np.where(ready & (np.abs(z) > c.deadband_n) & (np.abs(z) <= c.limit_n), z, 0.0)
+
+    def update(
+        self,
+        measured: Sequence[float],
+        foot_load_n: Sequence[float],
+        in_contact: Sequence[bool],
+        flagged: Sequence[bool],
+    ) -> np.ndarray:
+        """One sample; returns :attr:`zeros_n` (never raises on bad numbers).
+
+        Args:
+            measured: (8,) raw readings [N] (NaN skipped).
+            foot_load_n: Virtual load of each foot (right, left) [N].
+            in_contact: Per foot: contact planned or estimated.
+            flagged: (8,) the sensor is flagged.
+        """
+        c = self.config
+        m = np.asarray(measured, dtype=float)
+        max_n = c.learn_s / self.dt_s
+        for f in range(2):
+            load = float(foot_load_n[f])
+            swing = (not bool(in_contact[f])) and math.isfinite(load) and (
+                load < c.swing_load_fraction * self.robot.weight)
+            self._swing_s[f] = self._swing_s[f] + self.dt_s if swing else 0.0
+            if self._swing_s[f] <= c.settle_s:
+                continue
+            for i in range(4 * f, 4 * f + 4):
+                if flagged[i] or not math.isfinite(m[i]) or self._n[i] >= max_n:
+                    continue
+                if abs((self._sum[i] + m[i]) / (self._n[i] + 1)) > c.limit_n:
+                    continue
+                self._sum[i] += m[i]
+                self._n[i] += 1
+        return self.zeros_n
+
+
+# ------------------------------------------------------------------ gyro bias
+@dataclass(frozen=True)
+class GyroBiasConfig:
+    """Settings of :class:`GyroBiasLearner`.
+
+    Attributes:
+        learn_s: Standing time over which the gyro readings are averaged, then frozen [s].
+        apply_after_s: Averaged standing time before the bias is subtracted [s].
+        still_rad_s: A sample counts only when every gyro axis is below this [rad/s].
+        deadband_rad_s: A bias smaller than this on every axis is not applied (on an
+            unbiased gyro the virtual sensor sees the plain readings) [rad/s].
+    """
+
+    learn_s: float = 1.5
+    apply_after_s: float = 0.5
+    still_rad_s: float = 0.1
+    deadband_rad_s: float = 0.01
+
+    def __post_init__(self) -> None:
+        o = "gyro_bias"
+        check_number(o, "learn_s", self.learn_s, 0.0, 600.0, "s")
+        check_number(o, "apply_after_s", self.apply_after_s, 0.0, 600.0, "s")
+        check_number(o, "still_rad_s", self.still_rad_s, 0.0, 10.0, "rad/s")
+        check_number(o, "deadband_rad_s", self.deadband_rad_s, 0.0, 10.0, "rad/s")
+
+
+class GyroBiasLearner:
+    """Learns the gyro bias while the robot stands still (both feet planned in contact,
+    the ZMP reference at rest, the gyro quiet): the body does not rotate, so the mean
+    reading is the bias. The first ``learn_s`` of such samples are averaged, then the
+    bias is frozen; it is returned (for subtraction from the gyro readings before the
+    virtual sensor) once ``apply_after_s`` has been averaged and when it exceeds
+    ``deadband_rad_s`` on some axis.
+
+    Args:
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(self, dt_s: float = 0.001, config: GyroBiasConfig | None = None) -> None:
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else GyroBiasConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the bias."""
+        self._sum = [0.0, 0.0, 0.0]
+        self._n = 0
+        self._zmp_prev = (math.nan, math.nan)
+        self.still = False
+
+    @property
+    def bias_rad_s(self) -> tuple[float, float, float]:
+        """The bias applied now [rad/s] (zeros before ``apply_after_s`` or within the
+        deadband)."""
+        c = self.config
+        if self._n == 0 or self._n * self.dt_s < c.apply_after_s:
+            return (0.0, 0.0, 0.0)
+        b = tuple(q / self._n for q in self._sum)
+        if max(abs(q) for q in b) <= c.deadband_rad_s:
+            return (0.0, 0.0, 0.0)
+        return b  # type: ignore[return-value]
+
+    def update(
+        self, gyro: Sequence[float], contact_ref: Sequence[float], zmp_ref: Sequence[float],
+    ) -> tuple[float, float, float]:
+        """One sample; returns :attr:`bias_rad_s` (never raises on bad numbers).
+
+        Args:
+            gyro: (3,) gyro reading [rad/s].
+            contact_ref: Planned contact per foot (0/1, NaN unknown).
+            zmp_ref: Planned ZMP (x, y) [m] (NaN when the log has none).
+        """
+        c = self.config
+        zr = (float(zmp_ref[0]), float(zmp_ref[1]))
+        rest = not any(
+            math.isfinite(a) and math.isfinite(b) and abs(a - b) > 1e-6
+            for a, b in zip(zr, self._zmp_prev, strict=True)
+        )
+        self._zmp_prev = zr
+        g = [float(q) for q in gyro]
+        still = (
+            rest and all(math.isfinite(q) and q > 0.5 for q in contact_ref)
+            and all(math.isfinite(q) and abs(q) < c.still_rad_s for q in g)
+        )
+        self.still = bool(still)
+        if still and self._n * self.dt_s < c.learn_s:
+            self._sum = [a + b for a, b in zip(self._sum, g, strict=True)]
+            self._n += 1
+        return self.bias_rad_s
+
+
+# ------------------------------------------------------------------ IMU mounting tilt
+class ImuTiltLearner:
+    """Learns the IMU mounting tilt (roll, pitch) while the robot stands still: both soles
+    are flat on the ground then, so the sole normals the leg kinematics give from the IMU
+    attitude, mean over both feet and every ``every_n``-th standing sample of the first
+    ``learn_s``, are tilted by the mounting error. Returns the rotation ``C`` (IMU frame
+    as reported -> IMU frame as described) once ``apply_after_s`` has been averaged and the
+    tilt exceeds ``deadband_deg``; apply it as ``R_WI <- R_WI C^T``, ``acc <- C acc``,
+    ``gyro <- C gyro``.
+
+    Args:
+        kin: :class:`grfguard.estimate.kinematic.KinematicModel` of the robot.
+        dt_s: Sampling period in [s].
+    """
+
+    def __init__(self, kin, dt_s: float = 0.001, learn_s: float = 1.5,
+                 apply_after_s: float = 0.5, deadband_deg: float = 0.3,
+                 every_n: int = 10) -> None:
+        self.kin = kin
+        self.dt_s = float(dt_s)
+        self.learn_s = float(learn_s)
+        self.apply_after_s = float(apply_after_s)
+        self.deadband_deg = float(deadband_deg)
+        self.every_n = int(every_n)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the tilt."""
+        self._z = np.zeros(3)
+        self._n = 0
+        self._k = 0
+        self._C = np.eye(3)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) correction ``C`` applied now (identity when none)."""
+        return self._C
+
+    def tilt_deg(self) -> tuple[float, float]:
+        """Learned (roll, pitch) of the mounting in [deg]."""
+        if self._n == 0:
+            return (0.0, 0.0)
+        z = self._z / np.linalg.norm(self._z)
+        return (float(np.degrees(-z[1])), float(np.degrees(z[0])))
+
+    def update(self, q_rad: np.ndarray, quat_wxyz: np.ndarray, still: bool) -> np.ndarray:
+        """One sample; returns :attr:`rotation` (never raises on bad numbers)."""
+        if still and self._n * self.every_n * self.dt_s < self.learn_s:
+            self._k += 1
+            if self._k % self.every_n == 0 and np.all(np.isfinite(q_rad)) and np.all(
+                    np.isfinite(quat_wxyz)):
+                try:
+                    fr = self.kin.forward(np.asarray(q_rad, float), np.asarray(quat_wxyz, float))
+                    zs = fr.R_WS[:, :, 2].mean(axis=0)
+                except Exception:  # noqa: BLE001 - a bad sample is skipped
+                    zs = None
+                if zs is not None and np.all(np.isfinite(zs)):
+                    self._z += zs
+                    self._n += 1
+                    if self._n * self.every_n * self.dt_s >= self.apply_after_s:
+                        C = self._solve()
+                        if C is not None:
+                            self._C = C
+        return self._C
+
+    def _solve(self) -> np.ndarray | None:
+        z = self._z / np.linalg.norm(self._z)
+        ang = math.acos(float(np.clip(z[2], -1.0, 1.0)))
+        if math.degrees(ang) <= self.deadband_deg:
+            return None
+        # R maps e_z to z (minimal rotation): the mounting rotation up to yaw, C = R
+        axis = np.cross([0.0, 0.0, 1.0], z)
+        axis = axis / np.linalg.norm(axis)
+        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        R = np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K
+        return R
 
 
 # ---------------------------------------------------------------------------- wiring
