@@ -144,10 +144,16 @@ class Monitor:
     @classmethod
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
                 guard: GuardConfig | None = None,
-                common_mode: CommonModeConfig | bool = False) -> Monitor:
+                common_mode: CommonModeConfig | bool = False,
+                compiled: bool | None = None) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
-        the robot (physical ranges) from ``log.attrs``."""
+        the robot (physical ranges) from ``log.attrs``.
+
+        The virtual sensor is the compiled one (:mod:`grfguard.kernels`, same outputs to
+        about 1e-10 N) when it covers ``config.vfs`` and ``compiled`` (default
+        ``config.compiled``, True) is not False; its machine code is loaded from the
+        on-disk cache here (1-2 s once per process; about 35 s once per fresh install)."""
         from grfguard.calib.selfcal import robot_of
 
         cfg = config_for_log(log, config)
@@ -159,6 +165,12 @@ class Monitor:
             from grfguard.estimate.vfs import VirtualForceSensor
 
             vfs = VirtualForceSensor.for_log(log, cfg.vfs)
+            if cfg.compiled if compiled is None else compiled:
+                from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
+
+                if VFSKernel.supports(vfs.config):
+                    vfs = CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
+                    warm_up()
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
@@ -324,13 +336,17 @@ class Monitor:
 
     # ------------------------------------------------------------------ batch
     def _can_resync(self) -> bool:
-        """The VFS runs the Python stages (a compiled sensor is reset instead)."""
-        return not getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "_hist")
+        """The VFS can forget its rate history alone (Python stages or the compiled
+        sensor's ``resync``); other sensors are reset instead."""
+        return hasattr(self.vfs, "resync") or hasattr(self.vfs, "_hist")
 
     def _vfs_resync(self) -> None:
         """Forget the VFS's finite-difference history (a continuity break): the next two
         samples have no rate; filters, attitude and odometry keep their state."""
         v = self.vfs
+        if hasattr(v, "resync"):
+            v.resync()
+            return
         v._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
         v._prev_frames = None
         v._prev_L = None
@@ -342,6 +358,8 @@ class Monitor:
 
         vfs = self.vfs
         assert vfs is not None
+        if getattr(vfs, "compiled", False):
+            return vfs.run_resynced(clean, resync)
         vfs.reset()
         n = len(clean)
         inp = vfs._inputs(clean)
