@@ -20,6 +20,7 @@ Three stages, each its own module, wired here (the only module that knows all th
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any, NamedTuple
 
@@ -80,6 +81,23 @@ class _Prepared(NamedTuple):
     implausible: list[bool]
     state: str
     reason: str
+
+
+def _compiled_or(vfs: Any) -> Any:
+    """The compiled twin of ``vfs`` (kernels compiled or loaded now) when the kernel covers
+    its settings; ``vfs`` itself otherwise or when the kernels cannot be built here (e.g.
+    the cache cannot be written: a warning, the run goes on with the Python sensor)."""
+    from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
+
+    if not VFSKernel.supports(vfs.config):
+        return vfs
+    try:
+        warm_up()
+    except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
+        warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
+                      "pure-Python one", RuntimeWarning, stacklevel=3)
+        return vfs
+    return CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
 
 
 class Monitor:
@@ -166,11 +184,7 @@ class Monitor:
 
             vfs = VirtualForceSensor.for_log(log, cfg.vfs)
             if cfg.compiled if compiled is None else compiled:
-                from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
-
-                if VFSKernel.supports(vfs.config):
-                    vfs = CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
-                    warm_up()
+                vfs = _compiled_or(vfs)
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)

@@ -886,6 +886,10 @@ class VFSKernel:
         self.state[:] = 0.0
         self.state[_S_ANCHOR] = -1.0
 
+    def __getstate__(self) -> dict:
+        # the cached machine-code entry point is per process: looked up again after a copy
+        return {**self.__dict__, "_entry": None}
+
     def resync(self) -> None:
         """Forget the finite-difference history only (a continuity break: the next two
         samples have no rate); filters, attitude and odometry keep their state (as the
