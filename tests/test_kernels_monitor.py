@@ -15,7 +15,7 @@ from grfguard.sim import GaitConfig, NoiseConfig, simulate
 def test_monitor_run_and_update_match_python_monitor():
     walk = simulate(SURALP, GaitConfig(duration=8.0), NoiseConfig(), seed=5)
     log = inject_faults(walk, "r2=offset:150@5")
-    ref = Monitor.for_log(log).run(log)
+    ref = Monitor.for_log(log, compiled=False).run(log)
     mon = compiled_monitor(log)
     assert isinstance(mon.vfs, CompiledVirtualForceSensor)
     out = mon.run(log)

@@ -231,6 +231,11 @@ def run(
     topics_map: Annotated[
         Path | None, typer.Option("--map", help="Topics map TOML for a ROS bag input.")
     ] = None,
+    compiled: Annotated[
+        bool,
+        typer.Option("--compiled/--no-compiled",
+                     help="Compiled virtual force sensor (numba) or the pure-Python one."),
+    ] = True,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
@@ -251,7 +256,8 @@ def run(
     robot_for_log(df, rob, str(log))
     if unit_check:
         check_log_plausible(df, rob, str(log))
-    result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs)
+    result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs,
+                           compiled=compiled)
     write_log(result, output)
     _say(f"wrote {output}: {len(result)} samples")
 
@@ -294,11 +300,14 @@ def _run_monitor(
     thresholds: Path | None,
     method: str | None,
     vfs: str | None = None,
+    compiled: bool = True,
 ) -> Any:
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
 
     cfg = monitor_config(config, thresholds, method, vfs)
+    if not compiled:
+        cfg = cfg.replace(compiled=False)
     from grfguard.estimate.described import is_described, run_described
 
     if is_described(df):  # Talos, G1, a robot TOML: the batch wrench estimator (issue 9)

@@ -20,6 +20,7 @@ Three stages, each its own module, wired here (the only module that knows all th
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any, NamedTuple
 
@@ -113,6 +114,23 @@ class _Prepared(NamedTuple):
     reason: str
 
 
+def _compiled_or(vfs: Any) -> Any:
+    """The compiled twin of ``vfs`` (kernels compiled or loaded now) when the kernel covers
+    its settings; ``vfs`` itself otherwise or when the kernels cannot be built here (e.g.
+    the cache cannot be written: a warning, the run goes on with the Python sensor)."""
+    from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
+
+    if not VFSKernel.supports(vfs.config):
+        return vfs
+    try:
+        warm_up()
+    except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
+        warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
+                      "pure-Python one", RuntimeWarning, stacklevel=3)
+        return vfs
+    return CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
+
+
 class Monitor:
     """Virtual force sensor + fault detection, isolation, classification and recovery.
 
@@ -184,10 +202,16 @@ class Monitor:
     @classmethod
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
                 guard: GuardConfig | None = None,
-                common_mode: CommonModeConfig | bool = False) -> Monitor:
+                common_mode: CommonModeConfig | bool = False,
+                compiled: bool | None = None) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
-        the robot (physical ranges) from ``log.attrs``."""
+        the robot (physical ranges) from ``log.attrs``.
+
+        The virtual sensor is the compiled one (:mod:`grfguard.kernels`, same outputs to
+        about 1e-10 N) when it covers ``config.vfs`` and ``compiled`` (default
+        ``config.compiled``, True) is not False; its machine code is loaded from the
+        on-disk cache here (1-2 s once per process; about 35 s once per fresh install)."""
         from grfguard.calib.selfcal import robot_of
 
         cfg = config_for_log(log, config)
@@ -199,6 +223,8 @@ class Monitor:
             from grfguard.estimate.vfs import VirtualForceSensor
 
             vfs = VirtualForceSensor.for_log(log, cfg.vfs)
+            if cfg.compiled if compiled is None else compiled:
+                vfs = _compiled_or(vfs)
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
@@ -483,13 +509,17 @@ class Monitor:
 
     # ------------------------------------------------------------------ batch
     def _can_resync(self) -> bool:
-        """The VFS runs the Python stages (a compiled sensor is reset instead)."""
-        return not getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "_hist")
+        """The VFS can forget its rate history alone (Python stages or the compiled
+        sensor's ``resync``); other sensors are reset instead."""
+        return hasattr(self.vfs, "resync") or hasattr(self.vfs, "_hist")
 
     def _vfs_resync(self) -> None:
         """Forget the VFS's finite-difference history (a continuity break): the next two
         samples have no rate; filters, attitude and odometry keep their state."""
         v = self.vfs
+        if hasattr(v, "resync"):
+            v.resync()
+            return
         v._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
         v._prev_frames = None
         v._prev_L = None
@@ -501,6 +531,8 @@ class Monitor:
 
         vfs = self.vfs
         assert vfs is not None
+        if getattr(vfs, "compiled", False):
+            return vfs.run_resynced(clean, resync)
         vfs.reset()
         n = len(clean)
         inp = vfs._inputs(clean)

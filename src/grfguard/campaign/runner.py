@@ -156,6 +156,11 @@ def run_campaign(
     if not todo:
         return RunSummary(len(cells), len(cells), 0, 0, 0, time.perf_counter() - t0, 0.0, "")
 
+    # compile (or load) the kernels once here, before the workers run cells: local workers
+    # would otherwise all compile them at the same time on a fresh install (~35 s each)
+    from grfguard.kernels import warm_up
+
+    warm_up()
     client, own_cluster = _connect(client, scheduler, n_workers)
     try:
         address = str(client.scheduler.address)

@@ -46,6 +46,9 @@ class MonitorConfig:
         blend_s: Time constant of the hand-over to and from the reconstruction [s].
         init_s: Initialisation window of the paper's observer [s].
         diagnostics: Also output the test statistics (``stat_*`` and ``res_*`` columns).
+        compiled: ``Monitor.for_log`` runs the compiled virtual force sensor
+            (:mod:`grfguard.kernels`) when it covers the VFS settings; False keeps the
+            pure-Python sensor.
     """
 
     method: str = "default"
@@ -61,6 +64,7 @@ class MonitorConfig:
     blend_s: float = 0.03
     init_s: float = 0.1
     diagnostics: bool = False
+    compiled: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:

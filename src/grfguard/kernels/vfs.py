@@ -886,6 +886,37 @@ class VFSKernel:
         self.state[:] = 0.0
         self.state[_S_ANCHOR] = -1.0
 
+    def __getstate__(self) -> dict:
+        # the cached machine-code entry point is per process: looked up again after a copy
+        return {**self.__dict__, "_entry": None}
+
+    def resync(self) -> None:
+        """Forget the finite-difference history only (a continuity break: the next two
+        samples have no rate); filters, attitude and odometry keep their state (as the
+        monitor's resync of ``VirtualForceSensor``)."""
+        self.state[_S_HN] = 0.0
+        self.state[_S_PREVF] = 0.0
+        self.state[_S_PREVL_OK] = 0.0
+
+    def run_segments(self, X: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """Reset, then every row of ``X`` (T, 24) -> (T, 22), resynced (:meth:`resync`)
+        before each row index in ``starts``."""
+        self.reset()
+        X = np.ascontiguousarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != N_IN:
+            raise LogFormatError(
+                f"the compiled virtual force sensor takes a (T, {N_IN}) array in IN_COLUMNS "
+                f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
+            )
+        n = X.shape[0]
+        Y = np.empty((n, N_OUT))
+        cuts = sorted({0, n, *(int(i) for i in starts if 0 < int(i) < n)})
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            if a > 0:
+                self.resync()
+            vfs_run_packed(X[a:b], Y[a:b], *self.packed_args())
+        return Y
+
     def _args(self) -> tuple:
         return (self.state, self.prm, self.iprm, self.body_inertia, self.corner_radius,
                 self.filt_b, self.filt_a, self.filt_zi, self.tree_arrays, self.site_arrays,
@@ -1013,6 +1044,25 @@ class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
         super().reset()
         for k in getattr(self, "_kern", {}).values():
             k.reset()
+
+    def resync(self) -> None:
+        """Forget the finite-difference history only (the monitor's continuity break)."""
+        self._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
+        self._prev_frames = None
+        self._prev_L = None
+        for k in self._kern.values():
+            k.resync()
+
+    def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
+        """``run`` with :meth:`resync` before every row where ``resync`` is True (the batch
+        twin of a streaming monitor resyncing at breaks)."""
+        super().reset()
+        self._check_columns(log.columns)
+        X, has_gyro, has_ref = log_to_array(log)
+        k = self.kernel(has_gyro, has_ref)
+        Y = k.run_segments(X, np.flatnonzero(np.asarray(resync, bool)))
+        k.reset()
+        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
 
     def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """One sample as arrays: ``x`` (24,) in :data:`IN_COLUMNS` order -> (22,) in
