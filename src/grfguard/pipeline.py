@@ -509,55 +509,18 @@ class Monitor:
 
     # ------------------------------------------------------------------ batch
     def _can_resync(self) -> bool:
-        """The VFS can forget its rate history alone (Python stages or the compiled
-        sensor's ``resync``); other sensors are reset instead."""
-        return hasattr(self.vfs, "resync") or hasattr(self.vfs, "_hist")
+        """The VFS can forget its rate history alone (``resync``); other sensors are reset
+        instead."""
+        return hasattr(self.vfs, "resync")
 
     def _vfs_resync(self) -> None:
-        """Forget the VFS's finite-difference history (a continuity break): the next two
-        samples have no rate; filters, attitude and odometry keep their state."""
-        v = self.vfs
-        if hasattr(v, "resync"):
-            v.resync()
-            return
-        v._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
-        v._prev_frames = None
-        v._prev_L = None
+        """Forget the VFS's finite-difference history (a continuity break)."""
+        self.vfs.resync()
 
     def _vfs_batch(self, clean: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
-        """The VFS over the log, resynced where the streaming monitor resyncs it (the
-        stages of ``VirtualForceSensor.run`` per continuous segment)."""
-        from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
-
-        vfs = self.vfs
-        assert vfs is not None
-        if getattr(vfs, "compiled", False):
-            return vfs.run_resynced(clean, resync)
-        vfs.reset()
-        n = len(clean)
-        inp = vfs._inputs(clean)
-        valid = inp.valid()
-        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
-        result["vfs_valid"] = valid.astype(float)
-        starts = sorted({0, *np.flatnonzero(resync).tolist(), n})
-        outs: dict[str, list[np.ndarray]] = {}
-        for a, b in zip(starts[:-1], starts[1:], strict=True):
-            idx = a + np.flatnonzero(valid[a:b])
-            if a > 0 and resync[a]:
-                self._vfs_resync()
-            if idx.size:
-                for k, val in vfs._process(inp.take(idx)).items():
-                    outs.setdefault(k, []).append(np.asarray(val, float))
-        if outs:
-            pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
-            has = pos >= 0
-            for k, parts in outs.items():
-                v = np.concatenate(parts)
-                col = np.full(n, np.nan)
-                col[has] = v[pos[has]]
-                result[k] = col
-        vfs.reset()
-        return pd.DataFrame(result, index=clean.index)
+        """The VFS over the log, resynced where the streaming monitor resyncs it."""
+        assert self.vfs is not None
+        return self.vfs.run_resynced(clean, resync)
 
     def _vfs_reset_segments(self, clean: pd.DataFrame, resets: np.ndarray) -> pd.DataFrame:
         """The VFS over the log, reset (not resynced) at every break."""
@@ -565,7 +528,7 @@ class Monitor:
 
         assert self.vfs is not None
         n = len(clean)
-        valid = self.vfs._inputs(clean).valid()
+        valid = self.vfs.input_valid(clean)
         starts = sorted({0, *np.flatnonzero(resets).tolist(), n})
         parts = []
         for a, b in zip(starts[:-1], starts[1:], strict=True):
@@ -601,8 +564,8 @@ class Monitor:
         resets = np.zeros(n, dtype=bool)
         vdf = None
         if self.vfs is not None:
-            self.vfs._check_columns(log.columns)
-            valid_in = self.vfs._inputs(clean).valid() if n else np.zeros(0, bool)
+            self.vfs.check_columns(log.columns)
+            valid_in = self.vfs.input_valid(clean) if n else np.zeros(0, bool)
             for k in range(1, n):
                 resets[k] = times[k][1] == "time_gap" or not valid_in[k - 1]
             if not resets.any():

@@ -998,7 +998,7 @@ def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
 
     if vfs is None:
         vfs = VirtualForceSensor.for_log(log)
-    vfs._check_columns(log.columns)
+    vfs.check_columns(log.columns)
     X, has_gyro, has_ref = log_to_array(log)
     k = VFSKernel(vfs, has_gyro=has_gyro, has_ref=has_ref)
     Y = k.run(X)
@@ -1047,17 +1047,17 @@ class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
 
     def resync(self) -> None:
         """Forget the finite-difference history only (the monitor's continuity break)."""
-        self._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
-        self._prev_frames = None
-        self._prev_L = None
+        super().resync()
         for k in self._kern.values():
             k.resync()
 
     def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
         """``run`` with :meth:`resync` before every row where ``resync`` is True (the batch
         twin of a streaming monitor resyncing at breaks)."""
+        if not self.compiled:
+            return super().run_resynced(log, resync)
         super().reset()
-        self._check_columns(log.columns)
+        self.check_columns(log.columns)
         X, has_gyro, has_ref = log_to_array(log)
         k = self.kernel(has_gyro, has_ref)
         Y = k.run_segments(X, np.flatnonzero(np.asarray(resync, bool)))
@@ -1088,7 +1088,7 @@ class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
         if not self.compiled:
             return super().run(log)
         super().reset()
-        self._check_columns(log.columns)
+        self.check_columns(log.columns)
         X, has_gyro, has_ref = log_to_array(log)
         k = self.kernel(has_gyro, has_ref)
         Y = k.run(X)
