@@ -57,6 +57,7 @@ from grfguard.rotations import quat_to_matrix, rotation_to_quat
 __all__ = ["Monitor"]
 
 _NAN = float("nan")
+_UNSET = object()
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
@@ -109,6 +110,13 @@ def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
     order = list(log.columns) + [c for c in new if c not in log.columns]
     keep = log.drop(columns=[c for c in new if c in log.columns])
     return pd.concat([keep, add], axis=1)[order]
+
+
+def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
+    """Whether the log carries the gyro and the planned contact (the compiled virtual
+    sensor's switches)."""
+    return (all(c in log.columns for c in IMU_GYRO),
+            all(f"contact_ref_{s}" in log.columns for s in SIDES))
 
 
 class _Prepared(NamedTuple):
@@ -203,9 +211,13 @@ class Monitor:
         guard: GuardConfig | None = None,
         robot: RobotConfig | None = None,
         common_mode: CommonModeConfig | bool = False,
+        compiled: bool | None = None,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
+        self.compiled = self.config.compiled if compiled is None else bool(compiled)
+        self._kernels: dict[tuple[bool, bool], Any] = {}
+        self._kernels_for: Any = _UNSET
         self.guard = guard if guard is not None else GuardConfig()
         if robot is None:
             robot = getattr(vfs, "robot", None) or RobotConfig()
@@ -261,17 +273,74 @@ class Monitor:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
             robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
-        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode)
+        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
+                   compiled=compiled)
 
     @property
     def sensors(self) -> list[Any]:
         """Per-sensor state of the default detector."""
+        k = self._kernel()
+        if k is not None:
+            from grfguard.kernels.detect import sensor_states
+
+            return sensor_states(k.ss)
         return self.detector.sensors
+
+    def compiled_reason(self) -> str:
+        """Empty when the whole monitor runs compiled (:mod:`grfguard.kernels.monitor`:
+        guards, virtual sensor, default detector and recovery in one compiled step);
+        otherwise why it runs the pure-Python stages."""
+        if not self.compiled:
+            return "compiled=False"
+        if self.config.method != "default":
+            return f"method {self.config.method!r}"
+        if self.common is not None:
+            return "the common-mode layer"
+        if self.config.diagnostics:
+            return "diagnostics"
+        if self.vfs is None:
+            return ""
+        from grfguard.kernels.vfs import CompiledVirtualForceSensor
+
+        if not (isinstance(self.vfs, CompiledVirtualForceSensor) and self.vfs.compiled):
+            return "a pure-Python virtual force sensor"
+        return ""
+
+    def _kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
+        """The compiled monitor step for inputs with / without gyro and planned contact
+        (None when the monitor runs the Python stages)."""
+        if self._kernels_for is not self.vfs:
+            self._kernels = {}
+            self._kernels_for = self.vfs
+            self._compiled_ok = not self.compiled_reason()
+        if not self._compiled_ok:
+            return None
+        key = (has_gyro, has_ref)
+        k = self._kernels.get(key)
+        if k is None:
+            try:
+                from grfguard.kernels.detect import detect_params
+                from grfguard.kernels.monitor import MonitorKernel
+
+                prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
+                                    self.guard, (self.inputs.force_lo, self.inputs.force_hi))
+                vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
+                k = MonitorKernel(prm, self.inputs, vk)
+            except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
+                warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
+                              "stages", RuntimeWarning, stacklevel=3)
+                self._compiled_ok = False
+                return None
+            self._kernels[key] = k
+        return k
 
     def reset(self) -> None:
         """Forget everything (filters, flags, contact timeline, VFS state, guards)."""
         if self.vfs is not None:
             self.vfs.reset()
+        if self._kernels_for is self.vfs:
+            for k in self._kernels.values():
+                k.reset()
         self.detector.reset()
         self.paper.reset()
         self.recovery.reset()
@@ -425,6 +494,11 @@ class Monitor:
         """
         if not isinstance(row, Mapping):
             row = {}
+        k = self._kernel()
+        if k is not None:
+            from grfguard.kernels.monitor import update_dict
+
+            return update_dict(self, k, row)
         t_raw = _f(row, TIME)
         clean, reason = self.inputs.clean_row(row)
         if self.gyro_bias is not None:
@@ -587,6 +661,15 @@ class Monitor:
                 f"Monitor.run: the log lacks column(s) {missing}; see grfguard.io.schema"
             )
         self.reset()
+        if self.vfs is not None:
+            self.vfs.check_columns(log.columns)
+        k = self._kernel(*_has_gyro_ref(log))
+        if k is not None:
+            from grfguard.kernels.monitor import run_frame
+
+            out = run_frame(self, k, log)
+            out.attrs = {**log.attrs, "monitor": self.describe()}
+            return out
         attrs = log.attrs
         # the stages read columns only: without the metadata pandas would otherwise
         # deep-copy on every column access (a large cost on long logs)
