@@ -529,6 +529,65 @@ class Monitor:
         out.update(res)
         return out
 
+    @property
+    def input_columns(self) -> tuple[str, ...]:
+        """Layout of the input row of :meth:`update_array`: ``time``, the eight
+        ``force_<s>``, then the virtual sensor's inputs (joint angles, IMU, planned
+        contact: :data:`grfguard.kernels.vfs.IN_COLUMNS`) or, for a monitor without a
+        virtual sensor, the precomputed ``contact_ref_*``, ``vfs_*``, ``vfs_total_*``,
+        ``contact_est_*``, ``vfs_valid`` (:mod:`grfguard.kernels.monitor`)."""
+        from grfguard.kernels.monitor import input_columns
+
+        return input_columns(self.vfs is not None)
+
+    @property
+    def output_columns(self) -> tuple[str, ...]:
+        """Layout of the output row of :meth:`update_array`: the 22 virtual-sensor outputs
+        (with a virtual sensor inside), then ``flag_<s>`` (0/1), ``kind_<s>`` (index into
+        :data:`grfguard.kernels.detect.KIND_NAMES`), ``eta_<s>`` [N], ``recovered_<s>``
+        [N] for the eight sensors, and ``system_state`` (index into
+        :data:`grfguard.guard.SYSTEM_STATES`)."""
+        from grfguard.kernels.monitor import output_columns
+
+        return output_columns(self.vfs is not None)
+
+    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample as arrays (the fast streaming call): ``x`` in
+        :attr:`input_columns` order -> ``y`` in :attr:`output_columns` order (written into
+        ``y`` when given, a contiguous float64 array). Same numbers as :meth:`update`
+        (without the ``system_reason`` text); never raises on a bad sample. One compiled
+        call when the monitor runs compiled (:meth:`compiled_reason`), else through
+        :meth:`update`.
+
+        Raises:
+            LogFormatError: If ``x`` or ``y`` has the wrong length.
+        """
+        k = self._kernel()
+        n_in = len(self.input_columns)
+        n_out = len(self.output_columns)
+        if y is None:
+            y = np.empty(n_out)
+        if k is not None and type(x) is np.ndarray and x.shape == (n_in,) and \
+                x.dtype == np.float64 and x.flags.c_contiguous and y.shape == (n_out,) and \
+                y.dtype == np.float64 and y.flags.c_contiguous:
+            return k.step(x, y)
+        x = np.ascontiguousarray(x, dtype=float).ravel()
+        if x.shape != (n_in,) or y.shape != (n_out,):
+            raise LogFormatError(
+                f"Monitor.update_array takes an input row of {n_in} values in "
+                f"Monitor.input_columns order and an output row of {n_out}; got shapes "
+                f"{x.shape} and {y.shape}")
+        if k is not None:
+            yy = np.empty(n_out)
+            k.step(x, yy)
+            y[:] = yy
+            return y
+        from grfguard.kernels.monitor import dict_to_row
+
+        y[:] = dict_to_row(self.update(dict(zip(self.input_columns, x.tolist(),
+                                                strict=True))), self.output_columns)
+        return y
+
     def _unbias_row(self, clean: dict[str, Any]) -> None:
         """Subtract the learned gyro bias from one cleaned row (in place)."""
         assert self.gyro_bias is not None

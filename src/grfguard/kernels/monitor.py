@@ -22,8 +22,10 @@ Row layouts (:func:`input_columns`, :func:`output_columns`):
 
 * input, virtual sensor inside (33): ``time`` [s], ``force_r1..force_l4`` [N], then
   :data:`grfguard.kernels.vfs.IN_COLUMNS` (joint angles, IMU, planned contact);
-* input, precomputed virtual sensor (24): ``time``, ``force_*`` (8), ``contact_ref_r/l``,
-  ``vfs_r1..vfs_l4`` [N], ``vfs_total_r/l`` [N], ``contact_est_r/l``, ``vfs_valid``;
+* input, precomputed virtual sensor (46): ``time``, ``force_*`` (8), ``contact_ref_r/l``,
+  ``vfs_r1..vfs_l4`` [N], ``vfs_total_r/l`` [N], ``contact_est_r/l``, ``vfs_valid``, then
+  the estimator inputs the input guard checks (``imu_acc_*``, ``imu_gyro_*``,
+  ``imu_quat_*``, ``q_<joint>``; only checked, for the ``system_reason``; NaN if absent);
 * output: the 22 :data:`~grfguard.kernels.vfs.OUT_COLUMNS` (virtual sensor inside only),
   then ``flag_<s>`` (0/1) x8, ``kind_<s>`` (a code of
   :data:`~grfguard.kernels.detect.KIND_NAMES`) x8, ``eta_<s>`` [N] x8, ``recovered_<s>``
@@ -38,7 +40,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from grfguard.guard import SYSTEM_STATES
+from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
 from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME
 from grfguard.kernels._jit import njit
 from grfguard.kernels.detect import (
@@ -83,7 +85,8 @@ from grfguard.kernels.warmup import warm_up
 from grfguard.model.robot import SENSOR_NAMES, SIDES
 
 __all__ = ["compiled_monitor", "input_columns", "output_columns", "monitor_step",
-           "monitor_run", "MonitorKernel", "update_dict", "run_frame"]
+           "monitor_run", "MonitorKernel", "update_dict", "run_frame", "dict_to_row",
+           "warm_monitor"]
 
 #: Precomputed virtual-sensor columns of the input row (without a sensor inside).
 PRE_VFS_COLUMNS: tuple[str, ...] = (
@@ -108,7 +111,7 @@ def input_columns(with_vfs: bool) -> tuple[str, ...]:
     """Input row layout of :func:`monitor_step` (with the virtual sensor inside or not)."""
     if with_vfs:
         return (TIME, *FORCE_COLUMNS, *IN_COLUMNS)
-    return (TIME, *FORCE_COLUMNS, *PRE_VFS_COLUMNS)
+    return (TIME, *FORCE_COLUMNS, *PRE_VFS_COLUMNS, *ESTIMATOR_INPUTS)
 
 
 def output_columns(with_vfs: bool) -> tuple[str, ...]:
@@ -518,3 +521,35 @@ def _with_columns(log: pd.DataFrame, new: dict[str, Any]) -> pd.DataFrame:
     order = list(bare.columns) + [c for c in new if c not in bare.columns]
     keep = bare.drop(columns=[c for c in new if c in bare.columns])
     return pd.concat([keep, add], axis=1)[order]
+
+
+def dict_to_row(out: dict[str, Any], columns: tuple[str, ...]) -> np.ndarray:
+    """A ``Monitor.update`` dict as an output row in ``columns`` order (kinds and the
+    system state as their codes)."""
+    y = np.empty(len(columns))
+    for j, c in enumerate(columns):
+        val = out.get(c, math.nan)
+        if c.startswith("kind_"):
+            y[j] = KIND_NAMES.index(val) if val in KIND_NAMES else math.nan
+        elif c == "system_state":
+            y[j] = SYSTEM_STATES.index(val) if val in SYSTEM_STATES else math.nan
+        else:
+            y[j] = float(val)
+    return y
+
+
+def warm_monitor() -> None:
+    """Compile or load :func:`monitor_step` and :func:`monitor_run` (both layouts)."""
+    from grfguard.detect.config import MonitorConfig
+    from grfguard.estimate.vfs import VirtualForceSensor
+    from grfguard.guard import InputGuard
+    from grfguard.kernels.detect import detect_params
+    from grfguard.model.robot import RobotConfig
+
+    prm = detect_params(MonitorConfig())
+    guard = InputGuard(RobotConfig())
+    for vk in (None, VFSKernel(VirtualForceSensor())):
+        k = MonitorKernel(prm, guard, vk)
+        x = np.full(len(k.in_cols), math.nan)
+        k.step(x, np.empty(len(k.out_cols)))
+        k.run(x[None, :])
