@@ -115,20 +115,20 @@ class _Prepared(NamedTuple):
 
 
 def _compiled_or(vfs: Any) -> Any:
-    """The compiled twin of ``vfs`` (kernels compiled or loaded now) when the kernel covers
-    its settings; ``vfs`` itself otherwise or when the kernels cannot be built here (e.g.
-    the cache cannot be written: a warning, the run goes on with the Python sensor)."""
-    from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
+    """``vfs`` with its kernels compiled or loaded now when it runs compiled; the same
+    sensor on the Python stages when the kernels cannot be built here (e.g. the cache
+    cannot be written: a warning, the run goes on)."""
+    from grfguard.kernels import warm_up
 
-    if not VFSKernel.supports(vfs.config):
+    if not vfs.compiled:
         return vfs
     try:
         warm_up()
     except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
         warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
-                      "pure-Python one", RuntimeWarning, stacklevel=3)
-        return vfs
-    return CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
+                      "Python stages", RuntimeWarning, stacklevel=3)
+        return type(vfs)(vfs.robot, vfs.config, vfs.kin, compiled=False)
+    return vfs
 
 
 class Monitor:
@@ -222,9 +222,8 @@ class Monitor:
         if not has_vfs:
             from grfguard.estimate.vfs import VirtualForceSensor
 
-            vfs = VirtualForceSensor.for_log(log, cfg.vfs)
-            if cfg.compiled if compiled is None else compiled:
-                vfs = _compiled_or(vfs)
+            vfs = _compiled_or(VirtualForceSensor.for_log(
+                log, cfg.vfs, compiled=cfg.compiled if compiled is None else compiled))
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
