@@ -36,6 +36,7 @@ from grfguard.detect.system import (
     GyroBiasLearner,
     ImuTiltLearner,
     SwingZeroLearner,
+    hold_unarmed_tests,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -375,6 +376,9 @@ class Monitor:
             corr = [float(c) for c in cm.correction_n]
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
+        if self.zeros is not None:
+            hold_unarmed_tests(self.detector, [self.zeros.armed(f) for f in range(2)],
+                               self.common.armed)
         out = self._step(p.clock, x, v, tot, p.cref, p.cest)
         reasons = [cm.reason] if cm.reason else []
         if self.gyro_bias is not None and any(self._bias_now):
