@@ -30,6 +30,7 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector
 from grfguard.detect.paper import PaperDetector
+from grfguard.detect.standing import StandingConfig, StandingStage
 from grfguard.detect.system import (
     CommonModeConfig,
     CommonModeMonitor,
@@ -188,6 +189,10 @@ class Monitor:
         guard: Settings of the input and time guards.
         robot: Robot description for the physical ranges (default: the VFS's robot, or
             SURALP).
+        common_mode: Settings of the system-level common-mode fit (False: off).
+        standing: Settings of the standing layer
+            (:class:`~grfguard.detect.standing.StandingStage`: faults that start while
+            both feet stand; True: default settings, False: off).
 
     Example:
         >>> mon = Monitor.for_log(log)
@@ -204,6 +209,7 @@ class Monitor:
         guard: GuardConfig | None = None,
         robot: RobotConfig | None = None,
         common_mode: CommonModeConfig | bool = False,
+        standing: StandingConfig | bool = True,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
@@ -217,6 +223,11 @@ class Monitor:
         self.inputs = InputGuard(robot, self.guard)
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
+        # standing layer (issue 10): faults that start while both feet stand
+        self.standing: StandingStage | None = None
+        if standing is not False:
+            self.standing = StandingStage(self.config.dt_s, standing if isinstance(
+                standing, StandingConfig) else None)
         self.common: CommonModeMonitor | None = None
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
@@ -236,7 +247,8 @@ class Monitor:
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
                 guard: GuardConfig | None = None,
                 common_mode: CommonModeConfig | bool = False,
-                compiled: bool | None = None) -> Monitor:
+                compiled: bool | None = None,
+                standing: StandingConfig | bool = True) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
         the robot (physical ranges) from ``log.attrs``.
@@ -261,7 +273,8 @@ class Monitor:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
             robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
-        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode)
+        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
+                   standing=standing)
 
     @property
     def sensors(self) -> list[Any]:
@@ -277,6 +290,8 @@ class Monitor:
         self.recovery.reset()
         self.time_guard.reset()
         self.continuity.reset()
+        if self.standing is not None:
+            self.standing.reset()
         if self.common is not None:
             self.common.reset()
         if self.zeros is not None:
@@ -340,6 +355,8 @@ class Monitor:
             return self.paper.step(t, x, v)
         det = self.detector.step(t, x, v, tot, cref, cest)
         out = self.recovery.step(self.detector.sensors, x, v, tot, det.columns)
+        if self.standing is not None:
+            self.standing.step(x, v, tot, cref, cest, out)
         if det.diagnostics:
             out.update(det.diagnostics)
         return out
