@@ -119,8 +119,8 @@ def _bad_raw(walk: pd.DataFrame) -> pd.DataFrame:
 def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: bool) -> None:
     raw = _bad_raw(walk)
     log = raw if vfs_inside else with_vfs_columns(raw)
-    mon = Monitor.for_log(log)
-    ref_mon = Monitor.for_log(log, compiled=False)
+    mon = Monitor.for_log(log, standing=False)
+    ref_mon = Monitor.for_log(log, compiled=False, standing=False)
     assert mon.compiled_reason() == ""
     assert ref_mon.compiled_reason() != ""
     out = mon.run(log)

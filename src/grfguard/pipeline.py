@@ -30,12 +30,14 @@ import pandas as pd
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector
 from grfguard.detect.paper import PaperDetector
+from grfguard.detect.standing import StandingConfig, StandingStage
 from grfguard.detect.system import (
     CommonModeConfig,
     CommonModeMonitor,
     GyroBiasLearner,
     ImuTiltLearner,
     SwingZeroLearner,
+    hold_unarmed_tests,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -155,20 +157,20 @@ class _PreparedFrame(NamedTuple):
 
 
 def _compiled_or(vfs: Any) -> Any:
-    """The compiled twin of ``vfs`` (kernels compiled or loaded now) when the kernel covers
-    its settings; ``vfs`` itself otherwise or when the kernels cannot be built here (e.g.
-    the cache cannot be written: a warning, the run goes on with the Python sensor)."""
-    from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
+    """``vfs`` with its kernels compiled or loaded now when it runs compiled; the same
+    sensor on the Python stages when the kernels cannot be built here (e.g. the cache
+    cannot be written: a warning, the run goes on)."""
+    from grfguard.kernels import warm_up
 
-    if not VFSKernel.supports(vfs.config):
+    if not vfs.compiled:
         return vfs
     try:
         warm_up()
     except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
         warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
-                      "pure-Python one", RuntimeWarning, stacklevel=3)
-        return vfs
-    return CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
+                      "Python stages", RuntimeWarning, stacklevel=3)
+        return type(vfs)(vfs.robot, vfs.config, vfs.kin, compiled=False)
+    return vfs
 
 
 class Monitor:
@@ -195,6 +197,10 @@ class Monitor:
         guard: Settings of the input and time guards.
         robot: Robot description for the physical ranges (default: the VFS's robot, or
             SURALP).
+        common_mode: Settings of the system-level common-mode fit (False: off).
+        standing: Settings of the standing layer
+            (:class:`~grfguard.detect.standing.StandingStage`: faults that start while
+            both feet stand; True: default settings, False: off).
 
     Example:
         >>> mon = Monitor.for_log(log)
@@ -211,6 +217,7 @@ class Monitor:
         guard: GuardConfig | None = None,
         robot: RobotConfig | None = None,
         common_mode: CommonModeConfig | bool = False,
+        standing: StandingConfig | bool = True,
         compiled: bool | None = None,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
@@ -228,6 +235,11 @@ class Monitor:
         self.inputs = InputGuard(robot, self.guard)
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
+        # standing layer (issue 10): faults that start while both feet stand
+        self.standing: StandingStage | None = None
+        if standing is not False:
+            self.standing = StandingStage(self.config.dt_s, standing if isinstance(
+                standing, StandingConfig) else None)
         self.common: CommonModeMonitor | None = None
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
@@ -247,7 +259,8 @@ class Monitor:
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
                 guard: GuardConfig | None = None,
                 common_mode: CommonModeConfig | bool = False,
-                compiled: bool | None = None) -> Monitor:
+                compiled: bool | None = None,
+                standing: StandingConfig | bool = True) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
         the robot (physical ranges) from ``log.attrs``.
@@ -266,15 +279,14 @@ class Monitor:
         if not has_vfs:
             from grfguard.estimate.vfs import VirtualForceSensor
 
-            vfs = VirtualForceSensor.for_log(log, cfg.vfs)
-            if cfg.compiled if compiled is None else compiled:
-                vfs = _compiled_or(vfs)
+            vfs = _compiled_or(VirtualForceSensor.for_log(
+                log, cfg.vfs, compiled=cfg.compiled if compiled is None else compiled))
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
             robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
         return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
-                   compiled=compiled)
+                   standing=standing, compiled=compiled)
 
     @property
     def sensors(self) -> list[Any]:
@@ -298,11 +310,11 @@ class Monitor:
             return "the common-mode layer"
         if self.config.diagnostics:
             return "diagnostics"
+        if self.standing is not None:
+            return "the standing layer"
         if self.vfs is None:
             return ""
-        from grfguard.kernels.vfs import CompiledVirtualForceSensor
-
-        if not (isinstance(self.vfs, CompiledVirtualForceSensor) and self.vfs.compiled):
+        if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
             return "a pure-Python virtual force sensor"
         return ""
 
@@ -346,6 +358,8 @@ class Monitor:
         self.recovery.reset()
         self.time_guard.reset()
         self.continuity.reset()
+        if self.standing is not None:
+            self.standing.reset()
         if self.common is not None:
             self.common.reset()
         if self.zeros is not None:
@@ -409,6 +423,8 @@ class Monitor:
             return self.paper.step(t, x, v)
         det = self.detector.step(t, x, v, tot, cref, cest)
         out = self.recovery.step(self.detector.sensors, x, v, tot, det.columns)
+        if self.standing is not None:
+            self.standing.step(x, v, tot, cref, cest, out)
         if det.diagnostics:
             out.update(det.diagnostics)
         return out
@@ -445,6 +461,9 @@ class Monitor:
             corr = [float(c) for c in cm.correction_n]
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
+        if self.zeros is not None:
+            hold_unarmed_tests(self.detector, [self.zeros.armed(f) for f in range(2)],
+                               self.common.armed)
         out = self._step(p.clock, x, v, tot, p.cref, p.cest)
         reasons = [cm.reason] if cm.reason else []
         if self.gyro_bias is not None and any(self._bias_now):

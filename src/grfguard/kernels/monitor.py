@@ -9,7 +9,7 @@ common-mode layer, no diagnostics) on one row of plain floats, in the same order
 2. time guard and continuity (:class:`~grfguard.guard.TimeGuard`,
    :class:`~grfguard.guard.Continuity`): monotone clock, break detection, resync of the
    virtual sensor's rates, settling;
-3. the compiled virtual force sensor (:func:`grfguard.kernels.vfs.vfs_step_packed`) or the
+3. the compiled virtual force sensor (:func:`grfguard.kernels.vfs.vfs_step`) or the
    row's precomputed ``vfs_*`` values;
 4. the detector and the recovery (:func:`grfguard.kernels.detect.detect_step`);
 5. the output guard: an implausible reading's flag is reported as ``spikes``, the
@@ -77,9 +77,8 @@ from grfguard.kernels.vfs import (
     _S_PREVL_OK,
     IN_COLUMNS,
     OUT_COLUMNS,
-    CompiledVirtualForceSensor,
     VFSKernel,
-    vfs_step_packed,
+    vfs_step,
 )
 from grfguard.kernels.warmup import warm_up
 from grfguard.model.robot import SENSOR_NAMES, SIDES
@@ -195,7 +194,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws
             vstate[_S_HN] = 0.0
             vstate[_S_PREVF] = 0.0
             vstate[_S_PREVL_OK] = 0.0
-        vfs_step_packed(xc[9:9 + 24], vy, vstate, cf, ci, vws, viws)
+        vfs_step(xc[9:9 + 24], vy, vstate, cf, ci, vws, viws)
         for i in range(8):
             v[i] = vy[i]
         for f in range(2):
@@ -373,30 +372,21 @@ class MonitorKernel:
 
 
 def compiled_monitor(log: pd.DataFrame, config: Any = None, warm: bool = True) -> Any:
-    """``Monitor.for_log(log, config)`` with :class:`CompiledVirtualForceSensor` inside.
+    """``Monitor.for_log(log, config)`` (whose virtual force sensor is the compiled one
+    whenever the kernel covers the settings), kept for its old callers.
 
     Args:
         log: A log of the contract (robot and sampling period are read from it).
         config: A :class:`~grfguard.detect.MonitorConfig` (default settings if None).
         warm: Compile or load the kernels now (:func:`warm_up`) instead of at the first
             sample.
-
-    Returns:
-        The monitor; its ``vfs`` is compiled when the log needs a virtual sensor and the
-        settings are covered (:meth:`VFSKernel.supports`), else as ``Monitor.for_log``.
     """
     from grfguard.detect import Monitor
 
     mon = Monitor.for_log(log, config)
-    v = mon.vfs
-    if v is not None and VFSKernel.supports(v.config) and not isinstance(
-            v, CompiledVirtualForceSensor):
-        mon.vfs = CompiledVirtualForceSensor(v.robot, v.config, v.kin)
-        mon.reset()
-    if warm:
+    if warm and getattr(mon.vfs, "compiled", False):
         warm_up()
     return mon
-
 
 # ---------------------------------------------------------------- Monitor glue
 _KIND_OBJ = np.array(KIND_NAMES, dtype=object)
