@@ -71,6 +71,7 @@ from grfguard.kernels.detect import (
     new_state,
     reset_state,
 )
+from grfguard.kernels.standing import N_SD, standing_params, standing_reset, standing_step
 from grfguard.kernels.vfs import (
     _S_HN,
     _S_PREVF,
@@ -98,8 +99,9 @@ _O_CEST = OUT_COLUMNS.index("contact_est_r")
 _O_VALID = OUT_COLUMNS.index("vfs_valid")
 _I_REF_VFS = 9 + IN_COLUMNS.index("contact_ref_r")
 # scratch (ws) layout of monitor_step: detector scratch 0..63, then own slots
-_W_V, _W_TOT, _W_CEST, _W_CREF, _W_REC, _W_ETA = 64, 72, 74, 76, 78, 86
-N_WS = 96
+_W_V, _W_TOT, _W_CEST, _W_CREF, _W_REC, _W_ETA, _W_FLAG, _W_KIND = (
+    64, 72, 74, 76, 78, 86, 94, 102)
+N_WS = 110
 # monitor parameters (mp)
 _M_MODE, _M_REJECT, _M_QTOL, _M_QIDX = 0, 1, 2, 3
 # per-sample extras (ex): rejected, jump, valid, bounded
@@ -152,15 +154,16 @@ def _time_guard(gs, t, dt, gap_limit):
 
 
 @njit
-def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws, xc, vy,
-                 ws):
+def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
+                 xc, vy, ws):
     """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
 
     ``ex`` receives ``(rejected, jump [s], valid, bounded)`` of the sample (what the
     Python side needs for the ``system_reason`` text). ``mp``: mode (1 = virtual sensor
     inside), reject implausible, quaternion norm tolerance, quaternion column (-1: none);
     ``lims`` (2, n_in): physical range per input column (+-inf: not checked);
-    ``ss``/``gs``/``prm``: detector state and parameters; ``vstate``/``cf``/``ci``/
+    ``ss``/``gs``/``prm``: detector state and parameters; ``sd``/``sp``: the standing
+    layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``: off); ``vstate``/``cf``/``ci``/
     ``vws``/``viws``: the virtual sensor's (:class:`~grfguard.kernels.vfs.VFSKernel`);
     ``xc`` (n_in,), ``vy`` (22,), ``ws`` (:data:`N_WS`): scratch.
     """
@@ -251,6 +254,13 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws
     rec = ws[_W_REC:_W_REC + 8]
     eta = ws[_W_ETA:_W_ETA + 8]
     detect_step(ss, gs, prm, clock, xc[1:9], v, tot, cref, cest, st == ST_GAP, rec, eta, ws)
+    oflag = ws[_W_FLAG:_W_FLAG + 8]
+    okind = ws[_W_KIND:_W_KIND + 8]
+    for i in range(8):
+        oflag[i] = ss[i, FLAG]
+        okind[i] = ss[i, KIND]
+    if sp[0] != 0.0:
+        standing_step(sd, sp, xc[1:9], v, tot, cref, cest, oflag, okind, eta, rec)
     o = 0
     if mode == 1.0:
         for j in range(_NV):
@@ -258,14 +268,14 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws
         o = _NV
     for i in range(8):
         s = ss[i]
-        flagged = s[FLAG] != 0.0
+        flagged = oflag[i] != 0.0
         xr = xin[1 + i]
         if not math.isnan(xr) and not (lo <= xr and xr <= hi):
             s[SPIKE] = 1.0
         elif not flagged:
             s[SPIKE] = 0.0
         yout[o + i] = 1.0 if flagged else 0.0
-        yout[o + 8 + i] = K_SPIKES if (s[SPIKE] != 0.0 and flagged) else s[KIND]
+        yout[o + 8 + i] = K_SPIKES if (s[SPIKE] != 0.0 and flagged) else okind[i]
         yout[o + 16 + i] = eta[i]
         r = rec[i]
         if not math.isnan(r):
@@ -279,11 +289,12 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws
 
 
 @njit
-def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws, xc, vy, ws):
+def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
+                ws):
     """:func:`monitor_step` over every row of ``X`` into ``Y`` and ``EX`` (the batch path)."""
     for k in range(X.shape[0]):
-        monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, vstate, cf, ci, vws, viws, xc,
-                     vy, ws)
+        monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
+                     viws, xc, vy, ws)
 
 
 class MonitorKernel:
@@ -295,8 +306,12 @@ class MonitorKernel:
         vfs_kernel: The compiled virtual sensor (None: the rows carry ``vfs_*``).
     """
 
-    def __init__(self, prm: np.ndarray, inputs: Any, vfs_kernel: VFSKernel | None) -> None:
+    def __init__(self, prm: np.ndarray, inputs: Any, vfs_kernel: VFSKernel | None,
+                 standing: Any = None) -> None:
         self.with_vfs = vfs_kernel is not None
+        self.sp = standing_params(standing, float(prm[P_DT]))
+        self.sd = np.zeros(N_SD)
+        standing_reset(self.sd)
         self.in_cols = input_columns(self.with_vfs)
         self.out_cols = output_columns(self.with_vfs)
         self.prm = np.ascontiguousarray(prm, dtype=float)
@@ -337,6 +352,7 @@ class MonitorKernel:
     def reset(self) -> None:
         """A new monitor's state (the virtual sensor's too)."""
         reset_state(self.ss, self.gs)
+        standing_reset(self.sd)
         if self.vfs_kernel is not None:
             self.vfs_kernel.reset()
 
@@ -347,8 +363,8 @@ class MonitorKernel:
 
     def step(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """One row (contiguous float64 arrays of the documented lengths)."""
-        args = (x, y, self.ex, self.mp, self.lims, self.ss, self.gs, self.prm,
-                *self.vfs_args(), self.xc, self.vy, self.ws)
+        args = (x, y, self.ex, self.mp, self.lims, self.ss, self.gs, self.prm, self.sd,
+                self.sp, *self.vfs_args(), self.xc, self.vy, self.ws)
         ep = self._entry
         if ep is not None:
             ep(*args)
@@ -367,7 +383,8 @@ class MonitorKernel:
         Y = np.empty((n, len(self.out_cols)))
         EX = np.empty((n, N_EX))
         monitor_run(np.ascontiguousarray(X, dtype=float), Y, EX, self.mp, self.lims, self.ss,
-                    self.gs, self.prm, *self.vfs_args(), self.xc, self.vy, self.ws)
+                    self.gs, self.prm, self.sd, self.sp, *self.vfs_args(), self.xc, self.vy,
+                    self.ws)
         return Y, EX
 
 
@@ -538,8 +555,10 @@ def warm_monitor() -> None:
 
     prm = detect_params(MonitorConfig())
     guard = InputGuard(RobotConfig())
+    from grfguard.detect.standing import StandingStage
+
     for vk in (None, VFSKernel(VirtualForceSensor())):
-        k = MonitorKernel(prm, guard, vk)
+        k = MonitorKernel(prm, guard, vk, StandingStage())
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))
         k.run(x[None, :])
