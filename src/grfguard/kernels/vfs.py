@@ -126,8 +126,8 @@ def _sum_seq(a, n):
 
 
 @njit
-def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
-             tree, sites, ws, iws):
+def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
+          tree, sites, ws, iws):
     """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
 
     ``state`` is updated in place (only for a valid sample). ``prm``, ``iprm``,
@@ -680,19 +680,6 @@ def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
 
 
 @njit
-def vfs_run(X, Y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree,
-            sites, ws, iws):
-    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
-    number of valid samples."""
-    n = 0
-    for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws):
-            n += 1
-    return n
-
-
-@njit
 def _unpack(cf, ci):
     nb, nj, nq, ns, order = ci[0], ci[1], ci[2], ci[3], ci[4]
     nbr = nb - 1
@@ -753,28 +740,48 @@ def _unpack(cf, ci):
 
 
 @njit
-def vfs_step_packed(x, y, state, cf, ci, ws, iws):
-    """:func:`vfs_step` with every constant packed into two arrays ``cf`` (float) and ``ci``
-    (int) (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`): seven arguments, so a call from
-    Python spends little time converting them."""
+def vfs_step(x, y, state, cf, ci, ws, iws):
+    """One sample of the compiled virtual force sensor (callable from other ``@njit`` code).
+
+    Stable signature for callers inside compiled code (e.g. a whole-monitor step):
+
+    Args:
+        x: (24,) float64 input row, :data:`IN_COLUMNS` order (NaN where absent).
+        y: (22,) float64 output row, :data:`OUT_COLUMNS` order (written).
+        state: float64 state of one sensor (:attr:`VFSKernel.state`; updated in place).
+        cf, ci: float64 / int64 packed constants (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`;
+            read only; their layout is internal to this module).
+        ws, iws: float64 / int64 scratch (:attr:`VFSKernel.ws`, :attr:`VFSKernel.iws`).
+
+    Returns:
+        True for a valid sample; False when the row was not usable (``y`` then repeats
+        the last output with ``vfs_valid = 0``, NaN before the first valid sample).
+
+    ``VFSKernel.packed_args()`` gives ``(state, cf, ci, ws, iws)``. No allocation, no
+    Python objects; the same function runs behind :meth:`VFSKernel.step` (streaming) and
+    :func:`vfs_run` (batch), so both agree bit for bit.
+    """
     prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
         cf, ci)
-    return vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws)
+    return _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                 filt_zi, tree, sites, ws, iws)
 
 
 @njit
-def vfs_run_packed(X, Y, state, cf, ci, ws, iws):
-    """:func:`vfs_step_packed` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
-    number of valid samples (the batch path: the same step as streaming)."""
-    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
-        cf, ci)
+def vfs_run(X, Y, state, cf, ci, ws, iws):
+    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22) in one compiled
+    loop (the batch path: the same step as streaming); returns the number of valid
+    samples. Arguments after ``X, Y`` as in :func:`vfs_step`."""
     n = 0
     for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws):
+        if vfs_step(X[t], Y[t], state, cf, ci, ws, iws):
             n += 1
     return n
+
+
+#: Former names of :func:`vfs_step` / :func:`vfs_run`.
+vfs_step_packed = vfs_step
+vfs_run_packed = vfs_run
 
 
 class VFSKernel:
@@ -914,17 +921,12 @@ class VFSKernel:
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
             if a > 0:
                 self.resync()
-            vfs_run_packed(X[a:b], Y[a:b], *self.packed_args())
+            vfs_run(X[a:b], Y[a:b], *self.packed_args())
         return Y
-
-    def _args(self) -> tuple:
-        return (self.state, self.prm, self.iprm, self.body_inertia, self.corner_radius,
-                self.filt_b, self.filt_a, self.filt_zi, self.tree_arrays, self.site_arrays,
-                self.ws, self.iws)
 
     def packed_args(self) -> tuple:
         """``(state, cf, ci, ws, iws)``: the arguments after ``x, y`` of
-        :func:`vfs_step_packed` / ``X, Y`` of :func:`vfs_run_packed`."""
+        :func:`vfs_step` / ``X, Y`` of :func:`vfs_run`."""
         return (self.state, self.cf, self.ci, self.ws, self.iws)
 
     def step(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
@@ -944,14 +946,14 @@ class VFSKernel:
         if ep is not None and y.flags.c_contiguous and y.dtype == np.float64:
             ep(*args)
             return y
-        vfs_step_packed(*args)
+        vfs_step(*args)
         if ep is None and y.flags.c_contiguous and y.dtype == np.float64:
             # the compiled entry point for exactly these argument types skips the
             # dispatcher's type resolution (about 1 us per call)
             import numba
 
             sig = tuple(numba.typeof(a) for a in args)
-            cres = vfs_step_packed.overloads.get(sig)
+            cres = vfs_step.overloads.get(sig)
             self._entry = cres.entry_point if cres is not None else None
         return y
 
@@ -965,7 +967,7 @@ class VFSKernel:
                 f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
             )
         Y = np.empty((X.shape[0], N_OUT))
-        vfs_run_packed(X, Y, *self.packed_args())
+        vfs_run(X, Y, *self.packed_args())
         return Y
 
 
