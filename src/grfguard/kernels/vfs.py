@@ -1058,91 +1058,11 @@ def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
     return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
 
 
-def _base_sensor():
-    from grfguard.estimate.vfs import VirtualForceSensor
+def __getattr__(name: str):
+    # the compiled sensor is grfguard.estimate.vfs.VirtualForceSensor itself (it runs this
+    # kernel whenever the settings are covered); the old name stays importable
+    if name == "CompiledVirtualForceSensor":
+        from grfguard.estimate.vfs import VirtualForceSensor
 
-    return VirtualForceSensor
-
-
-class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
-    """Drop-in :class:`~grfguard.estimate.vfs.VirtualForceSensor` running the compiled step.
-
-    Same constructor, ``for_log``, ``reset``, ``update(row) -> dict`` and
-    ``run(log) -> DataFrame``; plus the array call :meth:`update_array`. Settings the
-    kernel does not cover (see :meth:`VFSKernel.supports`) fall back to the pure-Python
-    sensor. ``update`` assumes the gyro and planned contact are present in every row
-    (the log contract of a live robot); ``run`` reads what the log has.
-
-    Example:
-        >>> vfs = CompiledVirtualForceSensor.for_log(log)
-        >>> out = vfs.run(log)                      # same columns as the Python sensor
-        >>> mon = Monitor(MonitorConfig(), vfs)     # the monitor takes it as it is
-    """
-
-    def __init__(self, robot=None, config=None, kinematics=None) -> None:
-        super().__init__(robot, config, kinematics)
-        self.compiled = VFSKernel.supports(self.config)
-        self._kern = {}
-        self._y = np.empty(N_OUT)
-        self._x = np.empty(N_IN)
-
-    def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> VFSKernel:
-        """The compiled kernel for inputs with / without gyro and planned contact."""
-        key = (has_gyro, has_ref)
-        if key not in self._kern:
-            self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
-        return self._kern[key]
-
-    def reset(self) -> None:
-        super().reset()
-        for k in getattr(self, "_kern", {}).values():
-            k.reset()
-
-    def resync(self) -> None:
-        """Forget the finite-difference history only (the monitor's continuity break)."""
-        super().resync()
-        for k in self._kern.values():
-            k.resync()
-
-    def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
-        """``run`` with :meth:`resync` before every row where ``resync`` is True (the batch
-        twin of a streaming monitor resyncing at breaks)."""
-        if not self.compiled:
-            return super().run_resynced(log, resync)
-        super().reset()
-        self.check_columns(log.columns)
-        X, has_gyro, has_ref = log_to_array(log)
-        k = self.kernel(has_gyro, has_ref)
-        Y = k.run_segments(X, np.flatnonzero(np.asarray(resync, bool)))
-        k.reset()
-        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
-
-    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        """One sample as arrays: ``x`` (24,) in :data:`IN_COLUMNS` order -> (22,) in
-        :data:`OUT_COLUMNS` order (written into ``y`` when given). Never raises on a bad
-        sample (non-finite input: last output held, ``vfs_valid = 0``)."""
-        if y is None:
-            y = np.empty(N_OUT)
-        return self.kernel().step(x, y)
-
-    def update(self, row: Mapping[str, float]) -> dict[str, float]:
-        if not self.compiled:
-            return super().update(row)
-        x = self._x
-        for i, c in enumerate(IN_COLUMNS):
-            try:
-                x[i] = float(row[c])
-            except (KeyError, TypeError, ValueError):
-                x[i] = np.nan
-        y = self.update_array(x, self._y)
-        return dict(zip(OUT_COLUMNS, y.tolist(), strict=True))
-
-    def run(self, log: pd.DataFrame) -> pd.DataFrame:
-        if not self.compiled:
-            return super().run(log)
-        super().reset()
-        self.check_columns(log.columns)
-        X, has_gyro, has_ref = log_to_array(log)
-        k = self.kernel(has_gyro, has_ref)
-        Y = k.run(X)
-        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
+        return VirtualForceSensor
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
