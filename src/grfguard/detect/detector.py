@@ -88,6 +88,8 @@ class Detector:
         self.timeline = ContactTimeline(config, self.tuning)
         self.weight = WeightEstimate()
         self.totals = FootTotalTest()
+        #: Identical readings of a loaded sensor that mean frozen (``const_s`` at ``dt_s``).
+        self.const_samples = self.tuning.const_samples(config.thresholds.const_s, config.dt_s)
         self.reset()
 
     def reset(self) -> None:
@@ -133,7 +135,7 @@ class Detector:
             s.repeats = 0
             s.last_reading_n = _NAN
             return "nan"
-        alarm = "const" if constant_test(s, xi, loaded_ok, th.const_samples) else ""
+        alarm = "const" if constant_test(s, xi, loaded_ok, self.const_samples) else ""
         if swing_ok:
             seen.res_swing[i] = xi
             hit, seen.stat_swing[i] = swing_test(s, xi, th)

@@ -5,8 +5,9 @@ residual normalised per phase (thresholds in :class:`~grfguard.detect.thresholds
 evaluated only where its gate is open (:mod:`grfguard.detect.gating`):
 
 - :func:`constant_test`: a loaded sensor whose reading repeats exactly
-  ``const_samples`` times is frozen, stuck or clipped (a healthy load cell always shows
-  noise);
+  ``const_samples`` times (``Thresholds.const_s`` seconds at the log's rate, see
+  :meth:`~grfguard.detect.tuning.DetectTuning.const_samples`) is frozen, stuck or
+  clipped (a healthy load cell always shows noise);
 - :func:`swing_test`: in swing the true force is zero, so ``z = N_meas / σ_swing``;
 - :func:`corner_test`: in clean single support ``r = (N_meas - N̂) / weight`` per corner
   (N̂ the VFS corner force), an additive fault found in swing compensated;
