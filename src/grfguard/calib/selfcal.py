@@ -73,6 +73,13 @@ GAIN_RIDGE_QUIET = 1e-4
 GAIN_FIT_CUTOFF_HZ = 10.0
 #: The same with a vibrating accelerometer (leg odometry instead; accurate below ~2 Hz).
 GAIN_FIT_CUTOFF_VIBRATING_HZ = 2.0
+#: Rocking of a loaded sole about the flat ground (contact compliance) [rad].
+FLAT_SOLE_SIGMA_RAD = math.radians(0.2)
+#: Height difference of two loaded soles on flat ground (contact compliance) [m].
+FLAT_HEIGHT_SIGMA_M = 0.5e-3
+#: Prior (1 sigma) of each encoder offset [rad] (ASSUMED: a calibrated robot's encoders
+#: are within a degree).
+ENCODER_PRIOR_RAD = math.radians(0.5)
 #: Accelerometer RMS above 10 Hz [m/s^2] up to which it is used in the gain fit.
 ACC_QUIET_RMS = 0.2
 
@@ -326,6 +333,7 @@ def estimate_corrections(
     b_g = _fit_gyro_bias(data, sigma)
     b_a = _fit_acc_bias(data, robot.gravity, sigma)
     R_BI = _fit_imu_mount(data, robot, zero, sigma)
+    R_BI, enc = _fit_mount_and_encoders(data, robot, zero, R_BI, sigma)
     vib = max(accelerometer_vibration_rms(d.acc, d.dt) for d in data)
 
     def build(mass: float, gains: np.ndarray, d_com: np.ndarray) -> ModelCorrections:
@@ -445,6 +453,76 @@ def _fit_imu_mount(data: list, robot: RobotConfig, zero: np.ndarray,
     n_eff = max(1.0, len(res) * data[0].dt / 0.2)
     sigma["imu_mount_deg"] = float(np.degrees(np.std(res[:, :2]) / math.sqrt(n_eff)))
     return R_BI
+
+
+def _double_support_samples(data: list, robot: RobotConfig, zero: np.ndarray,
+                            every_s: float = 0.02) -> list[tuple[_LogData, np.ndarray]]:
+    """Per log, the indices of double-support samples with both feet loaded (> 15 % of
+    the weight each), away from contact changes, every ``every_s`` [s]."""
+    out = []
+    for d in data:
+        fz = d.f - zero
+        load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
+        m = (
+            (d.cref.min(axis=1) > 0.5)
+            & _away_from_edges(d.cref, d.dt)
+            & (load.min(axis=1) > 0.15 * robot.weight)
+        )
+        idx = np.flatnonzero(m)[:: max(1, int(round(every_s / d.dt)))]
+        if len(idx):
+            out.append((d, idx))
+    return out
+
+
+def _flat_feet_residuals(params: np.ndarray, samples: list, robot: RobotConfig,
+                         R0: np.ndarray) -> np.ndarray:
+    """Residuals of the flat-ground constraints in double support for ``params`` =
+    (mount roll, mount pitch [rad] on top of ``R0``, 12 encoder offsets [rad]): both sole
+    normals vertical (world x, y components, over ``FLAT_SOLE_SIGMA_RAD``) and both soles
+    at the same height (over ``FLAT_HEIGHT_SIGMA_M``), then the offsets over
+    ``ENCODER_PRIOR_RAD`` (their prior)."""
+    R_BI = R0 @ _rpy_to_R(np.array([params[0], params[1], 0.0]))
+    off = params[2:]
+    res = []
+    for d, idx in samples:
+        R_WB = quat_to_rotation(d.quat[idx]) @ R_BI.T
+        q = d.q[idx] - off
+        pr, Rr = leg_fk(robot, "r", np.zeros(3), R_WB, q[:, :6])
+        pl, Rl = leg_fk(robot, "l", np.zeros(3), R_WB, q[:, 6:])
+        res += [Rr[:, :2, 2].ravel() / FLAT_SOLE_SIGMA_RAD,
+                Rl[:, :2, 2].ravel() / FLAT_SOLE_SIGMA_RAD,
+                (pl[:, 2] - pr[:, 2]) / FLAT_HEIGHT_SIGMA_M]
+    res.append(off / ENCODER_PRIOR_RAD)
+    return np.concatenate(res)
+
+
+def _fit_mount_and_encoders(data: list, robot: RobotConfig, zero: np.ndarray,
+                            R0: np.ndarray, sigma: dict[str, float]
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 4b: IMU mounting ``R_BI`` (3, 3) and encoder offsets [rad] (12,) jointly.
+
+    The sole normals alone fix only the mounting plus the legs' summed joint offsets (an
+    encoder offset tilts the kinematic sole like a mounting error does); that both soles
+    stand at the same height on flat ground (mm over the 0.2 m between the feet) separates
+    them. Gauss-Newton from ``R0`` with a prior of ``ENCODER_PRIOR_RAD`` on each offset.
+    """
+    samples = _double_support_samples(data, robot, zero)
+    p = np.zeros(14)
+    for _ in range(3):
+        r0 = _flat_feet_residuals(p, samples, robot, R0)
+        J = np.empty((len(r0), 14))
+        for k in range(14):
+            dp = np.zeros(14)
+            dp[k] = 1e-6
+            J[:, k] = (_flat_feet_residuals(p + dp, samples, robot, R0) - r0) / 1e-6
+        step, *_ = np.linalg.lstsq(J, -r0, rcond=None)
+        p = p + step
+        if np.max(np.abs(step)) < 1e-8:
+            break
+    cov = np.linalg.inv(J.T @ J)
+    sigma["imu_mount_deg"] = float(np.degrees(math.sqrt(max(cov[0, 0], cov[1, 1]))))
+    sigma["encoder_offset_deg"] = float(np.degrees(math.sqrt(np.max(np.diag(cov)[2:]))))
+    return R0 @ _rpy_to_R(np.array([p[0], p[1], 0.0])), p[2:]
 
 
 def accelerometer_vibration_rms(acc: np.ndarray, dt: float) -> float:
