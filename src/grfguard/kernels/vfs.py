@@ -126,8 +126,8 @@ def _sum_seq(a, n):
 
 
 @njit
-def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
-             tree, sites, ws, iws):
+def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
+          tree, sites, ws, iws):
     """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
 
     ``state`` is updated in place (only for a valid sample). ``prm``, ``iprm``,
@@ -680,19 +680,6 @@ def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
 
 
 @njit
-def vfs_run(X, Y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree,
-            sites, ws, iws):
-    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
-    number of valid samples."""
-    n = 0
-    for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws):
-            n += 1
-    return n
-
-
-@njit
 def _unpack(cf, ci):
     nb, nj, nq, ns, order = ci[0], ci[1], ci[2], ci[3], ci[4]
     nbr = nb - 1
@@ -753,28 +740,48 @@ def _unpack(cf, ci):
 
 
 @njit
-def vfs_step_packed(x, y, state, cf, ci, ws, iws):
-    """:func:`vfs_step` with every constant packed into two arrays ``cf`` (float) and ``ci``
-    (int) (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`): seven arguments, so a call from
-    Python spends little time converting them."""
+def vfs_step(x, y, state, cf, ci, ws, iws):
+    """One sample of the compiled virtual force sensor (callable from other ``@njit`` code).
+
+    Stable signature for callers inside compiled code (e.g. a whole-monitor step):
+
+    Args:
+        x: (24,) float64 input row, :data:`IN_COLUMNS` order (NaN where absent).
+        y: (22,) float64 output row, :data:`OUT_COLUMNS` order (written).
+        state: float64 state of one sensor (:attr:`VFSKernel.state`; updated in place).
+        cf, ci: float64 / int64 packed constants (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`;
+            read only; their layout is internal to this module).
+        ws, iws: float64 / int64 scratch (:attr:`VFSKernel.ws`, :attr:`VFSKernel.iws`).
+
+    Returns:
+        True for a valid sample; False when the row was not usable (``y`` then repeats
+        the last output with ``vfs_valid = 0``, NaN before the first valid sample).
+
+    ``VFSKernel.packed_args()`` gives ``(state, cf, ci, ws, iws)``. No allocation, no
+    Python objects; the same function runs behind :meth:`VFSKernel.step` (streaming) and
+    :func:`vfs_run` (batch), so both agree bit for bit.
+    """
     prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
         cf, ci)
-    return vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws)
+    return _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                 filt_zi, tree, sites, ws, iws)
 
 
 @njit
-def vfs_run_packed(X, Y, state, cf, ci, ws, iws):
-    """:func:`vfs_step_packed` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
-    number of valid samples (the batch path: the same step as streaming)."""
-    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
-        cf, ci)
+def vfs_run(X, Y, state, cf, ci, ws, iws):
+    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22) in one compiled
+    loop (the batch path: the same step as streaming); returns the number of valid
+    samples. Arguments after ``X, Y`` as in :func:`vfs_step`."""
     n = 0
     for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws):
+        if vfs_step(X[t], Y[t], state, cf, ci, ws, iws):
             n += 1
     return n
+
+
+#: Former names of :func:`vfs_step` / :func:`vfs_run`.
+vfs_step_packed = vfs_step
+vfs_run_packed = vfs_run
 
 
 class VFSKernel:
@@ -914,17 +921,12 @@ class VFSKernel:
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
             if a > 0:
                 self.resync()
-            vfs_run_packed(X[a:b], Y[a:b], *self.packed_args())
+            vfs_run(X[a:b], Y[a:b], *self.packed_args())
         return Y
-
-    def _args(self) -> tuple:
-        return (self.state, self.prm, self.iprm, self.body_inertia, self.corner_radius,
-                self.filt_b, self.filt_a, self.filt_zi, self.tree_arrays, self.site_arrays,
-                self.ws, self.iws)
 
     def packed_args(self) -> tuple:
         """``(state, cf, ci, ws, iws)``: the arguments after ``x, y`` of
-        :func:`vfs_step_packed` / ``X, Y`` of :func:`vfs_run_packed`."""
+        :func:`vfs_step` / ``X, Y`` of :func:`vfs_run`."""
         return (self.state, self.cf, self.ci, self.ws, self.iws)
 
     def step(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
@@ -944,14 +946,14 @@ class VFSKernel:
         if ep is not None and y.flags.c_contiguous and y.dtype == np.float64:
             ep(*args)
             return y
-        vfs_step_packed(*args)
+        vfs_step(*args)
         if ep is None and y.flags.c_contiguous and y.dtype == np.float64:
             # the compiled entry point for exactly these argument types skips the
             # dispatcher's type resolution (about 1 us per call)
             import numba
 
             sig = tuple(numba.typeof(a) for a in args)
-            cres = vfs_step_packed.overloads.get(sig)
+            cres = vfs_step.overloads.get(sig)
             self._entry = cres.entry_point if cres is not None else None
         return y
 
@@ -965,7 +967,7 @@ class VFSKernel:
                 f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
             )
         Y = np.empty((X.shape[0], N_OUT))
-        vfs_run_packed(X, Y, *self.packed_args())
+        vfs_run(X, Y, *self.packed_args())
         return Y
 
 
@@ -1005,91 +1007,11 @@ def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
     return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
 
 
-def _base_sensor():
-    from grfguard.estimate.vfs import VirtualForceSensor
+def __getattr__(name: str):
+    # the compiled sensor is grfguard.estimate.vfs.VirtualForceSensor itself (it runs this
+    # kernel whenever the settings are covered); the old name stays importable
+    if name == "CompiledVirtualForceSensor":
+        from grfguard.estimate.vfs import VirtualForceSensor
 
-    return VirtualForceSensor
-
-
-class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
-    """Drop-in :class:`~grfguard.estimate.vfs.VirtualForceSensor` running the compiled step.
-
-    Same constructor, ``for_log``, ``reset``, ``update(row) -> dict`` and
-    ``run(log) -> DataFrame``; plus the array call :meth:`update_array`. Settings the
-    kernel does not cover (see :meth:`VFSKernel.supports`) fall back to the pure-Python
-    sensor. ``update`` assumes the gyro and planned contact are present in every row
-    (the log contract of a live robot); ``run`` reads what the log has.
-
-    Example:
-        >>> vfs = CompiledVirtualForceSensor.for_log(log)
-        >>> out = vfs.run(log)                      # same columns as the Python sensor
-        >>> mon = Monitor(MonitorConfig(), vfs)     # the monitor takes it as it is
-    """
-
-    def __init__(self, robot=None, config=None, kinematics=None) -> None:
-        super().__init__(robot, config, kinematics)
-        self.compiled = VFSKernel.supports(self.config)
-        self._kern = {}
-        self._y = np.empty(N_OUT)
-        self._x = np.empty(N_IN)
-
-    def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> VFSKernel:
-        """The compiled kernel for inputs with / without gyro and planned contact."""
-        key = (has_gyro, has_ref)
-        if key not in self._kern:
-            self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
-        return self._kern[key]
-
-    def reset(self) -> None:
-        super().reset()
-        for k in getattr(self, "_kern", {}).values():
-            k.reset()
-
-    def resync(self) -> None:
-        """Forget the finite-difference history only (the monitor's continuity break)."""
-        super().resync()
-        for k in self._kern.values():
-            k.resync()
-
-    def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
-        """``run`` with :meth:`resync` before every row where ``resync`` is True (the batch
-        twin of a streaming monitor resyncing at breaks)."""
-        if not self.compiled:
-            return super().run_resynced(log, resync)
-        super().reset()
-        self.check_columns(log.columns)
-        X, has_gyro, has_ref = log_to_array(log)
-        k = self.kernel(has_gyro, has_ref)
-        Y = k.run_segments(X, np.flatnonzero(np.asarray(resync, bool)))
-        k.reset()
-        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
-
-    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        """One sample as arrays: ``x`` (24,) in :data:`IN_COLUMNS` order -> (22,) in
-        :data:`OUT_COLUMNS` order (written into ``y`` when given). Never raises on a bad
-        sample (non-finite input: last output held, ``vfs_valid = 0``)."""
-        if y is None:
-            y = np.empty(N_OUT)
-        return self.kernel().step(x, y)
-
-    def update(self, row: Mapping[str, float]) -> dict[str, float]:
-        if not self.compiled:
-            return super().update(row)
-        x = self._x
-        for i, c in enumerate(IN_COLUMNS):
-            try:
-                x[i] = float(row[c])
-            except (KeyError, TypeError, ValueError):
-                x[i] = np.nan
-        y = self.update_array(x, self._y)
-        return dict(zip(OUT_COLUMNS, y.tolist(), strict=True))
-
-    def run(self, log: pd.DataFrame) -> pd.DataFrame:
-        if not self.compiled:
-            return super().run(log)
-        super().reset()
-        self.check_columns(log.columns)
-        X, has_gyro, has_ref = log_to_array(log)
-        k = self.kernel(has_gyro, has_ref)
-        Y = k.run(X)
-        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
+        return VirtualForceSensor
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
