@@ -103,7 +103,7 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
     p[P_SIG], p[P_SWK], p[P_SWH] = th.sigma_swing_n, th.swing_kappa, th.swing_h
     p[P_TOTSIG], p[P_TOTK], p[P_TOTH] = th.total_sigma, th.total_kappa, th.total_h
     p[P_CORSIG], p[P_CORK], p[P_CORH] = th.corner_sigma, th.corner_kappa, th.corner_h
-    p[P_CONSTN] = th.const_samples
+    p[P_CONSTN] = tn.const_samples(th.const_s, dt)  # seconds -> samples (robots branch)
     p[P_CLEVEL], p[P_CWFRAC] = tn.contact_level, tn.contact_weight_fraction
     p[P_GMINSW], p[P_GLOADSIG] = tn.guard_min_swing_fraction, tn.guard_load_sigma
     p[P_GMINSENS], p[P_OUTSIG] = tn.guard_min_sensors, tn.outlier_sigma
