@@ -75,3 +75,17 @@ def test_constant_run_must_beat_the_sensors_chance_repeats() -> None:
     coarse = [float(k // 2) for k in range(400)]  # every value twice
     assert run_length(smooth) == 4  # p = 1/401: (1/401)^3 <= 1e-6 < (1/401)^2
     assert run_length(coarse) == 21  # p = 201/401: 20 repeats
+
+
+def test_frozen_time_is_in_seconds_and_legacy_counts_are_read_at_1_khz() -> None:
+    from grfguard.detect.config import MonitorConfig
+    from grfguard.detect.detector import Detector
+    from grfguard.detect.thresholds import Thresholds
+    from grfguard.errors import ConfigError
+
+    th = Thresholds.from_toml_text("[thresholds]\nconst_samples = 30\n")
+    assert th.const_s == pytest.approx(0.030)
+    with pytest.raises(ConfigError, match="const_s"):
+        Thresholds.from_toml_text("[thresholds]\nconst_samples = 30\nconst_s = 0.03\n")
+    n = {dt: Detector(MonitorConfig(dt_s=dt)).const_samples for dt in (1e-3, 5e-3, 1e-2)}
+    assert n == {1e-3: 25, 5e-3: 5, 1e-2: 3}
