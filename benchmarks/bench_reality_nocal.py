@@ -189,8 +189,8 @@ def main() -> None:
            "r2 of 10/20/40/80 N, drift on l3 of 2/5/10/15 N/s, gain on r4 of "
            "1.1/1.2/1.5/2): offset / drift / gain." if args.ladder else ""),
         "",
-        f"| gap | healthy flagged ({args.duration:g} s) | model_mismatch | reason (end) | r1 frozen | "
-        "r2 +100 N | r3 drift | r4 -100 N | left FA | smallest offset / drift / gain |",
+        f"| gap | healthy flagged ({args.duration:g} s) | model_mismatch | reason (end) | "
+        "r1 frozen | r2 +100 N | r3 drift | r4 -100 N | left FA | smallest offset / drift / gain |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, ff, sc, ld, _ in results:
