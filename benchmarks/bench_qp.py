@@ -2,12 +2,13 @@
 
 Measures, on walking-like data (seeded):
 
-* :func:`grfguard.estimate.corner_qp.solve_corner_qp`, the paper split's per-foot QP
-  (n = 4, fixed sole points: the tabulated path) and the rigid 8-corner split (per-sample
-  world points relative to the ZMP, contact masks: the enumeration path), ns per sample in
-  batch and µs per one-sample call (what streaming pays);
+* :func:`grfguard.estimate.compliance.qp_split` (the package's one corner QP, the
+  compiled solver of the virtual force sensor), on the paper split's per-foot QP (n = 4,
+  fixed sole points) and the rigid 8-corner split (per-sample world points relative to
+  the ZMP, contact masks), ns per sample in batch and µs per one-sample call; the exact
+  free-set enumeration it replaced (``tests/reference/corner_qp.py``) for comparison;
 * :func:`grfguard.estimate.compliance.solve_with_prior`, the default split (8 corners,
-  sole-compliance prior, NNLS with a penalty row), µs per sample;
+  sole-compliance prior), µs per one-sample call from Python;
 * the same QPs solved by daqp directly (``daqp.solve``, MIT; dev dependency) and through
   qpsolvers, µs per solve, and the largest force difference to grfguard;
 * the default split as the compiled virtual force sensor solves it
@@ -27,16 +28,20 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from _common import BENCHMARKS_MD, update_section
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from exact_qp import package_qp as solve_corner_qp  # noqa: E402  (the package's solver)
 from grfguard.estimate.compliance import compliance_prior, solve_with_prior
-from grfguard.estimate.corner_qp import solve_corner_qp
 from grfguard.kernels._jit import njit
 from grfguard.kernels.nnls import new_scratch, prior_qp
 from grfguard.model.robot import SURALP
+from reference.corner_qp import solve_corner_qp as exact_corner_qp  # noqa: E402
 
 SECTION = "## Contact-point QP"
 W_PAPER, W_DEFAULT = 1e-2, 1e-6  # [m²]
@@ -110,12 +115,19 @@ def measure(T: int, K: int, repeat: int, seed: int) -> list[tuple[str, str, str,
         ("n=4, paper split (fixed sole, W=0.01)", sole, d4, fz, W_PAPER, None),
         ("n=8, rigid split (per-sample points, contact)", rel, z8, total, W_DEFAULT, contact),
     )
+    solve_corner_qp(rel[:2], z8[:2], total[:2], W_DEFAULT, contact[:2])  # compile / load
     for label, p, d, b, w, ok in cases:
         t, c = best_of(lambda p=p, d=d, b=b, w=w, ok=ok: solve_corner_qp(p, d, b, w, ok), repeat)
-        rows.append(("batch `solve_corner_qp`", label,
-                     f"{t / T * 1e9:.0f} / {c / T * 1e9:.0f} ns/sample", f"{T} samples"))
         fixed = p.ndim == 2
         ours = solve_corner_qp(p, d, b, w, ok)
+        te, ce = best_of(lambda p=p, d=d, b=b, w=w, ok=ok: exact_corner_qp(p, d, b, w, ok), 1)
+        gap = np.nanmax(np.abs(exact_corner_qp(p, d, b, w, ok) - ours))
+        rows.append(("batch `qp_split` (compiled loop)", label,
+                     f"{t / T * 1e9:.0f} / {c / T * 1e9:.0f} ns/sample",
+                     f"{T} samples; max diff to the exact enumeration {gap:.1e} N"))
+        rows.append(("batch exact enumeration (tests/reference/corner_qp.py)", label,
+                     f"{te / T * 1e9:.0f} / {ce / T * 1e9:.0f} ns/sample",
+                     "the package's solver before; extended precision"))
 
         def one(i, p=p, d=d, b=b, w=w, ok=ok, fixed=fixed):
             return solve_corner_qp(p if fixed else p[i : i + 1], d[i : i + 1], b[i : i + 1], w,
@@ -123,7 +135,7 @@ def measure(T: int, K: int, repeat: int, seed: int) -> list[tuple[str, str, str,
 
         t, c = per_call(one, K, repeat)
         diff = max(np.abs(one(i)[0] - ours[i]).max() for i in range(K))
-        rows.append(("one sample `solve_corner_qp`", label,
+        rows.append(("one sample `qp_split`", label,
                      f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve", f"max diff to batch {diff:.1e} N"))
         for name, fn in (("daqp.solve", _daqp), ("qpsolvers + daqp", _qpsolvers)):
             def call(i, p=p, d=d, b=b, w=w, ok=ok, fixed=fixed, fn=fn):
@@ -138,7 +150,7 @@ def measure(T: int, K: int, repeat: int, seed: int) -> list[tuple[str, str, str,
     t, c = per_call(lambda i: solve_with_prior(rel[i], prior[i], total[i], W_DEFAULT, contact[i]),
                     K, repeat)
     rows.append(("one sample `solve_with_prior` (default split)", "n=8, compliance prior",
-                 f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve", "NNLS + penalty row, then rescaled"))
+                 f"{t * 1e6:.1f} / {c * 1e6:.1f} µs/solve", "penalty row, then rescaled"))
     return rows
 
 
@@ -242,18 +254,20 @@ def _compliance_rows(rng: np.random.Generator, n: int, label: str, K: int,
 
 
 READING = """Reading (CPU times; the machine is shared, wall times are not comparable across
-rows). The default split runs inside the compiled virtual force sensor's step (numba), where
-daqp cannot be called: there it costs 0.7 µs (4 corners) / 1.4 µs (8 corners) of CPU per
-solve against 26-33 µs for one daqp call from Python. Its sum equals F to rounding (the
-penalty row's residual is removed by the final rescale; daqp's equality holds to 1e-10 -
-1e-8 N) and its forces are within 1e-8 N of the exact-equality optimum computed in
-rationals (daqp: 1e-9 - 1e-8 N): the penalty row moves the optimum by less than 1e-8 N,
-eight orders below the 2 N sensor noise, so the kernel keeps it. daqp therefore stays a
-dev dependency (the cross-check of tests and this benchmark), not a runtime one. The
-per-foot table of the paper's split is ~25x cheaper in batch than a daqp call per sample;
-for one sample daqp is faster (26 vs 31 µs per foot, 28 vs 158 µs for the rigid 8-corner
-enumeration), but those solvers serve only the Python stages of non-default settings (the
-paper's split, ``contact_stiffness_per_kg = 0``)."""
+rows). One solver serves every corner QP of the package: the compiled active-set solver
+``grfguard.kernels.nnls.prior_qp``, inside the compiled virtual force sensor's step (where
+daqp cannot be called) and behind ``grfguard.estimate.compliance.qp_split`` for the Python
+stages (the compliance split of settings the kernel does not cover, the rigid split, the
+paper's per-foot split). In the compiled step it costs under 1.5 µs of CPU per solve (4 or
+8 corners) against 23-33 µs for one daqp call from Python; in batch it matches or beats the
+exact free-set enumeration it replaced (now ``tests/reference/corner_qp.py``) and agrees
+with it to 1e-11 N. The sum equals F to rounding (the penalty row's residual is removed by
+the final rescale; daqp's equality holds to 1e-10 - 1e-8 N) and the forces are within 1e-8 N
+of the exact-equality optimum computed in rationals (daqp: 1e-9 - 1e-8 N): the penalty row
+moves the optimum by less than 1e-8 N, eight orders below the 2 N sensor noise. daqp
+therefore stays a dev dependency (the cross-check of the tests and of this benchmark), not
+a runtime one. A one-sample call from Python (what the Python stages pay per sample when
+streaming) costs about as much as a daqp call."""
 
 
 def main() -> None:
