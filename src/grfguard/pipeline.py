@@ -314,8 +314,6 @@ class Monitor:
             return "the common-mode layer"
         if self.config.diagnostics:
             return "diagnostics"
-        if self.standing is not None:
-            return "the standing layer"
         if self.vfs is None:
             return ""
         if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
@@ -341,7 +339,7 @@ class Monitor:
                 prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
                                     self.guard, (self.inputs.force_lo, self.inputs.force_hi))
                 vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
-                k = MonitorKernel(prm, self.inputs, vk)
+                k = MonitorKernel(prm, self.inputs, vk, self.standing)
             except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
                 warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
                               "stages", RuntimeWarning, stacklevel=3)
