@@ -38,6 +38,7 @@ from grfguard.detect.system import (
     ImuTiltLearner,
     SwingZeroLearner,
     hold_unarmed_tests,
+    swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -361,13 +362,16 @@ class Monitor:
                        for ce, cr in zip(p.cest, p.cref, strict=True)]
             z = self.zeros.update(p.x, p.tot, contact, flags)
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        v0, tot0 = list(p.v), list(p.tot)
+        swing_load_to_stance(x, v0, tot0, p.cref, self.robot.weight)
+        p = p._replace(v=v0, tot=tot0)
         if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
             self._tilt_seen = self._tilt_now
             self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
         if self._tilt_settle_s > 0.0:
             self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
-        cm = self.common.update(x, p.v, valid, frozen=frozen)
+        cm = self.common.update(x, p.v, valid, frozen=frozen, planned=p.cref)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]

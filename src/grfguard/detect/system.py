@@ -38,7 +38,7 @@ from grfguard.model.robot import SURALP, RobotConfig
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
     "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
-    "hold_unarmed_tests", "VibrationConfig", "AccVibrationDetector",
+    "hold_unarmed_tests", "VibrationConfig", "AccVibrationDetector", "swing_load_to_stance",
 ]
 
 
@@ -154,6 +154,7 @@ class CommonModeMonitor:
         vfs: Sequence[float],
         valid_foot: Sequence[bool] = (True, True),
         frozen: bool = False,
+        planned: Sequence[float] | None = None,
     ) -> CommonModeResult:
         """One sample.
 
@@ -163,6 +164,10 @@ class CommonModeMonitor:
             valid_foot: Per foot (right, left): the foot is in contact and its virtual
                 forces are valid.
             frozen: Do not learn from this sample (e.g. a sensor is flagged).
+            planned: Planned contact per foot (right, left); when given, only planned
+                single support is learned from (the virtual sensor may put the whole
+                load on one foot in planned double support while the other still
+                carries some: a wrong total).
 
         Returns:
             The :class:`CommonModeResult` (never raises on bad numbers).
@@ -176,6 +181,9 @@ class CommonModeMonitor:
         feet = [bool(valid_foot[f]) and loads[f] > c.min_load_fraction * self.robot.weight
                 for f in range(2)]
         if c.single_support_only and all(feet):
+            feet = [False, False]
+        if planned is not None and c.single_support_only and not (
+                all(isf(q) for q in planned) and (planned[0] > 0.5) != (planned[1] > 0.5)):
             feet = [False, False]
         use = [feet[i // 4] and ok[i] for i in range(8)]
         if any(use):
@@ -396,6 +404,46 @@ def hold_unarmed_tests(detector, zeros_armed: Sequence[bool], stance_armed: bool
                 s.corner_pos = s.corner_neg = 0.0
         if not stance:
             totals.g_pos[f] = totals.g_neg[f] = 0.0
+
+
+def swing_load_to_stance(
+    x: Sequence[float], v: list[float], tot: list[float], cref: Sequence[float],
+    weight_n: float, air_fraction: float = 0.05,
+) -> bool:
+    """Planned single support, the swing foot's readings near zero (it is in the air),
+    yet the virtual sensor put load on it: its kinematic contact (corner heights within
+    a few mm of the ground) was fooled by encoder offsets or the attitude. The whole
+    vertical force is the stance foot's: move it there (stance corners scaled, swing
+    foot zero), in place. Returns True when something was moved.
+
+    Args:
+        x: (8,) readings [N] (zeros removed).
+        v: (8,) virtual corner forces [N] (modified).
+        tot: Virtual foot forces (right, left) [N] (modified).
+        cref: Planned contact per foot.
+        weight_n: Robot weight [N].
+        air_fraction: The swing foot is in the air when its readings sum below this
+            fraction of the weight.
+    """
+    if not all(math.isfinite(q) for q in cref):
+        return False
+    plan = [q > 0.5 for q in cref]
+    if plan[0] == plan[1]:
+        return False
+    st, sw = (0, 1) if plan[0] else (1, 0)
+    other, mine = tot[sw], tot[st]
+    if not (math.isfinite(other) and math.isfinite(mine)) or other <= 0.0 or mine <= 0.0:
+        return False
+    xs = [x[i] for i in range(4 * sw, 4 * sw + 4)]
+    if not all(math.isfinite(q) for q in xs) or abs(math.fsum(xs)) > air_fraction * weight_n:
+        return False
+    k = (mine + other) / mine
+    for i in range(4 * st, 4 * st + 4):
+        v[i] *= k
+    for i in range(4 * sw, 4 * sw + 4):
+        v[i] = 0.0
+    tot[st], tot[sw] = mine + other, 0.0
+    return True
 
 
 # ------------------------------------------------------------------ accelerometer vibration
