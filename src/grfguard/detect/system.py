@@ -139,6 +139,10 @@ class CommonModeMonitor:
         self._theta = np.zeros(3)
         self._sum_r = 0.0
         self._sum_v = 0.0
+        self._sr_f = [0.0, 0.0]  # per foot: summed residuals, virtual forces
+        self._sv_f = [0.0, 0.0]
+        self._mv_f = [[0.0, 0.0], [0.0, 0.0]]  # per foot: sum v L x / S_x, sum v L y / S_y
+        self._alpha_f = [0.0, 0.0]
         self._loaded_s = 0.0
         self._armed_s = 0.0
 
@@ -197,7 +201,8 @@ class CommonModeMonitor:
         n_use = sum(use)
         if n_use >= 3:
             # a residual that stands out from the others is a sensor's, not the model's
-            e = {i: abs(res[i] - (a0 * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
+            af = self._alpha_f
+            e = {i: abs(res[i] - (af[i // 4] * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
                  for i in range(8) if use[i]}
             worst = max(e, key=e.__getitem__)
             if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
@@ -208,6 +213,11 @@ class CommonModeMonitor:
             M *= lam
             b *= lam
             sr = sv = 0.0
+            for f in range(2):
+                self._sr_f[f] *= lam
+                self._sv_f[f] *= lam
+                self._mv_f[f][0] *= lam
+                self._mv_f[f][1] *= lam
             for i in range(8):
                 if use[i]:
                     p0, p1, p2 = phi[i]
@@ -223,16 +233,26 @@ class CommonModeMonitor:
                     b[2] += p2 * r
                     sr += r
                     sv += p0
+                    f = i // 4
+                    self._sr_f[f] += r
+                    self._sv_f[f] += p0
+                    self._mv_f[f][0] += p0 * p1
+                    self._mv_f[f][1] += p0 * p2
             M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
             self._sum_r = lam * self._sum_r + sr
             self._sum_v = lam * self._sum_v + sv
             self._loaded_s += self.dt_s
-            # alpha from the totals (robust), then the common CoP shift given alpha
+            # alpha from the totals (robust), per foot (each foot's load cells have their
+            # own mean gain) once the foot has data; then the common CoP shift given them
             alpha = self._sum_r / self._sum_v if self._sum_v > 0 else 0.0
+            sv_min = 0.1 * self._sum_v
+            self._alpha_f = [self._sr_f[f] / self._sv_f[f] if self._sv_f[f] > sv_min
+                             else alpha for f in range(2)]
+            af = self._alpha_f
             reg = 1e-6 * (M[1, 1] + M[2, 2] + 1e-9)
             m11, m12, m22 = M[1, 1] + reg, M[1, 2], M[2, 2] + reg
-            r1 = b[1] - alpha * M[1, 0]
-            r2 = b[2] - alpha * M[2, 0]
+            r1 = b[1] - af[0] * self._mv_f[0][0] - af[1] * self._mv_f[1][0]
+            r2 = b[2] - af[0] * self._mv_f[0][1] - af[1] * self._mv_f[1][1]
             det = m11 * m22 - m12 * m12
             if det > 0 and isf(det):
                 self._theta = np.array(
@@ -240,13 +260,19 @@ class CommonModeMonitor:
         warm = self._loaded_s >= c.warmup_s
         th = self._theta if warm else np.zeros(3)
         ratio = float(np.clip(th[0], -c.max_ratio, c.max_ratio))
+        ratio_f = [float(np.clip(q, -c.max_ratio, c.max_ratio)) if warm else 0.0
+                   for q in self._alpha_f]
         sx = float(np.clip(th[1], -c.max_cop_shift_m, c.max_cop_shift_m))
         sy = float(np.clip(th[2], -c.max_cop_shift_m, c.max_cop_shift_m))
         shift = np.array([sx, sy])
         reasons = []
         if warm:
-            if abs(ratio) > c.mass_ratio_limit:
-                reasons.append(f"total force off by {100 * ratio:+.1f} %")
+            if max(abs(q) for q in ratio_f) > c.mass_ratio_limit:
+                if abs(ratio_f[0] - ratio_f[1]) > c.mass_ratio_limit:
+                    reasons.append(f"total force off by {100 * ratio_f[0]:+.1f} % (right), "
+                                   f"{100 * ratio_f[1]:+.1f} % (left)")
+                else:
+                    reasons.append(f"total force off by {100 * ratio:+.1f} %")
             if math.hypot(sx, sy) > c.cop_shift_limit_m:
                 reasons.append(
                     f"attitude/CoM inconsistent (CoP shifted {100 * sx:+.1f} cm x, "
@@ -254,7 +280,7 @@ class CommonModeMonitor:
                 )
         if reasons:
             corr = np.array([
-                (ratio * v[i] if ok[i] else 0.0) + phi[i][1] * sx + phi[i][2] * sy
+                (ratio_f[i // 4] * v[i] if ok[i] else 0.0) + phi[i][1] * sx + phi[i][2] * sy
                 for i in range(8)])
             corr = np.where(np.isfinite(corr), corr, 0.0)
         else:  # no evidence against the model: leave the virtual forces alone
