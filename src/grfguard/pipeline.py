@@ -271,6 +271,7 @@ class Monitor:
             self.vibration.reset()
             self.vfs_quiet.reset()
         self.detector.config = self.config
+        self._vib_active = False
 
     def _vibration_setup(self, vfs: Any) -> None:
         """``common_mode``: a twin virtual sensor without the accelerometer, used (with
@@ -291,6 +292,7 @@ class Monitor:
     def _vibration_on(self) -> None:
         """Switch the detector to the widened corner threshold (once)."""
         self.detector.config = self._quiet_config
+        self._vib_active = True
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
         if self.vfs is not None:
@@ -385,7 +387,8 @@ class Monitor:
         if self.gyro_bias is not None and any(self._bias_now):
             bx, by, bz = self._bias_now
             reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
-        if self.vibration is not None and self.vibration.on:
+        if self._vib_active:
+            assert self.vibration is not None
             reasons.append(
                 f"accelerometer vibration (RMS {self.vibration.rms_m_s2:.1f} m/s^2 above "
                 f"{self.vibration.config.cutoff_hz:g} Hz): virtual sensor without it, corner "
