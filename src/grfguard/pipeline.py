@@ -32,12 +32,14 @@ from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector
 from grfguard.detect.paper import PaperDetector
 from grfguard.detect.standing import StandingConfig, StandingStage
 from grfguard.detect.system import (
+    AccVibrationDetector,
     CommonModeConfig,
     CommonModeMonitor,
     GyroBiasLearner,
     ImuTiltLearner,
     SwingZeroLearner,
     hold_unarmed_tests,
+    swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -244,6 +246,8 @@ class Monitor:
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
         self.tilt: ImuTiltLearner | None = None
+        self.vibration: AccVibrationDetector | None = None
+        self.vfs_quiet: Any = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
@@ -253,6 +257,7 @@ class Monitor:
             if kin is not None and hasattr(kin, "forward"):
                 self.tilt = ImuTiltLearner(kin, self.config.dt_s, learn_s=0.2,
                                            apply_after_s=0.1, every_n=5)
+            self._vibration_setup(vfs)
         self.reset()
 
     @classmethod
@@ -374,6 +379,32 @@ class Monitor:
         self._tilt_rows: np.ndarray | None = None
         self._eye = self.tilt.rotation if self.tilt is not None else None
         self._spike = [False] * len(SENSOR_NAMES)
+        if self.vibration is not None:
+            self.vibration.reset()
+            self.vfs_quiet.reset()
+        self.detector.config = self.config
+        self._vib_active = False
+
+    def _vibration_setup(self, vfs: Any) -> None:
+        """``common_mode``: a twin virtual sensor without the accelerometer, used (with
+        the corner threshold widened) once the accelerometer vibrates
+        (:class:`~grfguard.detect.system.AccVibrationDetector`)."""
+        import dataclasses
+
+        cfg = getattr(vfs, "config", None)
+        if vfs is None or not getattr(cfg, "use_accelerometer", False):
+            return
+        self.vibration = AccVibrationDetector(self.config.dt_s)
+        self.vfs_quiet = type(vfs)(vfs.robot, dataclasses.replace(cfg, use_accelerometer=False),
+                                   vfs.kin)
+        th = self.config.thresholds
+        self._quiet_config = self.config.with_thresholds(dataclasses.replace(
+            th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))
+
+    def _vibration_on(self) -> None:
+        """Switch the detector to the widened corner threshold (once)."""
+        self.detector.config = self._quiet_config
+        self._vib_active = True
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
         if self.vfs is not None:
@@ -447,13 +478,16 @@ class Monitor:
                        for ce, cr in zip(p.cest, p.cref, strict=True)]
             z = self.zeros.update(p.x, p.tot, contact, flags)
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        v0, tot0 = list(p.v), list(p.tot)
+        swing_load_to_stance(x, v0, tot0, p.cref, self.robot.weight)
+        p = p._replace(v=v0, tot=tot0)
         if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
             self._tilt_seen = self._tilt_now
             self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
         if self._tilt_settle_s > 0.0:
             self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
-        cm = self.common.update(x, p.v, valid, frozen=frozen)
+        cm = self.common.update(x, p.v, valid, frozen=frozen, planned=p.cref)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]
@@ -467,6 +501,12 @@ class Monitor:
         if self.gyro_bias is not None and any(self._bias_now):
             bx, by, bz = self._bias_now
             reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
+        if self._vib_active:
+            assert self.vibration is not None
+            reasons.append(
+                f"accelerometer vibration (RMS {self.vibration.rms_m_s2:.1f} m/s^2 above "
+                f"{self.vibration.config.cutoff_hz:g} Hz): virtual sensor without it, corner "
+                f"threshold x{self.vibration.config.corner_sigma_scale:g}")
         if any(self._tilt_now):
             reasons.append("IMU mounting tilt (roll {:+.1f}, pitch {:+.1f}) deg removed".format(
                 *self._tilt_now))
@@ -528,7 +568,17 @@ class Monitor:
                 self._vfs_resync()
             else:
                 self.vfs.reset()
+            if self.vfs_quiet is not None:
+                self.vfs_quiet.reset()
         vout = self._vfs_row(clean)
+        if self.vibration is not None:
+            try:
+                vq = self.vfs_quiet.update(clean)
+            except Exception:  # noqa: BLE001 - a bad sample must never raise
+                vq = {}
+            if self.vibration.update(_f(clean, IMU_ACC[0]), _f(clean, IMU_ACC[1])):
+                vout = vq
+                self._vibration_on()
         src = vout if self.vfs is not None else clean
         v = [_f(src, vfs_col(s)) for s in SENSOR_NAMES]
         tot = [_f(src, c) for c in VFS_TOTAL_COLUMNS]
@@ -771,6 +821,17 @@ class Monitor:
                 vdf = self._vfs_batch(clean, resets)
             else:
                 vdf = self._vfs_reset_segments(clean, resets)
+        k_vib = n
+        if self.vibration is not None and vdf is not None:
+            k_vib = self.vibration.run(
+                pd.to_numeric(clean[IMU_ACC[0]], errors="coerce").to_numpy(float),
+                pd.to_numeric(clean[IMU_ACC[1]], errors="coerce").to_numpy(float))
+            if k_vib < n:
+                vq = self.vfs_quiet.run(clean)
+                self.vfs_quiet.reset()
+                vdf = vdf.copy()
+                qcols = [c for c in vdf.columns if c in vq.columns]
+                vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
         prep = self._prepare_frame(log, clean, vdf if vdf is not None else clean, times,
                                    reasons, resets)
         if self.config.method == "paper":
@@ -783,6 +844,8 @@ class Monitor:
                     self._bias_now = tuple(float(q) for q in self._bias_rows[k])
                 if self._tilt_rows is not None:
                     self._tilt_now = tuple(float(q) for q in self._tilt_rows[k])
+                if k == k_vib:
+                    self._vibration_on()
                 rows.append(self._detect(prep.sample(k)))
             res_df = pd.DataFrame(rows) if rows else pd.DataFrame()
             cols = {c: res_df[c].to_numpy() for c in res_df.columns}
