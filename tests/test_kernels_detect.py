@@ -115,12 +115,14 @@ def _bad_raw(walk: pd.DataFrame) -> pd.DataFrame:
     return raw.drop(index=ix[5000:5100])
 
 
-@pytest.mark.parametrize("vfs_inside", [True, False])
-def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: bool) -> None:
+@pytest.mark.parametrize(("vfs_inside", "standing"), [(True, True), (False, True),
+                                                      (True, False)])
+def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: bool,
+                                                standing: bool) -> None:
     raw = _bad_raw(walk)
     log = raw if vfs_inside else with_vfs_columns(raw)
-    mon = Monitor.for_log(log, standing=False)
-    ref_mon = Monitor.for_log(log, compiled=False, standing=False)
+    mon = Monitor.for_log(log, standing=standing)
+    ref_mon = Monitor.for_log(log, compiled=False, standing=standing)
     assert mon.compiled_reason() == ""
     assert ref_mon.compiled_reason() != ""
     out = mon.run(log)
@@ -174,3 +176,21 @@ def test_uncompiled_features_fall_back(walk: pd.DataFrame) -> None:
         y = mon.update_array(np.full(len(mon.input_columns), np.nan))
         assert y.shape == (len(mon.output_columns),)
         assert np.isfinite(y[-9:-1]).all()  # recovered forces never NaN
+
+
+def test_compiled_standing_layer_equals_python() -> None:
+    """Faults that start during a stand (the standing layer flags them) give the same
+    outputs compiled and in Python."""
+    stand = with_vfs_columns(simulate(SURALP, GaitConfig(duration=8.0, start_time=3.0),
+                                      NoiseConfig(), seed=3))
+    log = inject_faults(stand, ["r2=offset:40@1.6", "l3=drift:40@1.4"], seed=2)
+    out = Monitor.for_log(log).run(log)
+    ref = Monitor.for_log(log, compiled=False).run(log)
+    for c in ref.columns:
+        a, b = out[c].to_numpy(), ref[c].to_numpy()
+        if a.dtype.kind == "f":
+            _assert_close(a, b.astype(float))
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=c)
+    early = out["time"] < 3.0
+    assert out.loc[early, "flag_r2"].any()  # flagged while standing

@@ -133,3 +133,29 @@ def test_stage_holds_the_flag_until_both_feet_have_swung():
         assert step(faulty, phase)["flag_r1"]
     out = step(faulty, both)  # the left foot's swing after the right foot's ends
     assert not out["flag_r1"] and "kind_r1" not in out  # the detector's row is left as is
+
+
+def test_held_flag_tells_a_gain_from_an_offset_once_the_load_changes():
+    """Standing, a gain of 1.5 on a 100 N load reads like a +50 N offset; when the foot
+    lifts, a gain reads zero (an offset would read 50 N): the held flag becomes a gain and
+    the recovered force follows the load."""
+    stage = StandingStage(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01))
+    v = [100.0] * 8
+
+    def step(xx, vv, c):
+        out = {f: False for f in FLAGS}
+        stage.step(xx, vv, [400.0, 400.0], c, [np.nan, np.nan], out)
+        return out
+
+    for _ in range(40):
+        step([100.0] * 8, v, [1.0, 1.0])
+    for _ in range(100):
+        out = step([150.0] + [100.0] * 7, v, [1.0, 1.0])
+    assert out["kind_r1"] == "offset" and out["eta_r1"] == pytest.approx(50.0, abs=1.0)
+    swing = [0.0] * 4 + [200.0] * 4
+    for _ in range(200):  # the right foot swings: true load 0, the reading 1.5 x 0
+        out = step(swing, swing, [0.0, 1.0])
+    assert out["kind_r1"] == "gain" and out["recovered_r1"] == pytest.approx(0.0, abs=1.0)
+    for _ in range(50):  # back on the ground with 120 N: the gain is removed
+        out = step([180.0] + [100.0] * 7, [120.0] + [100.0] * 7, [1.0, 1.0])
+    assert out["recovered_r1"] == pytest.approx(120.0, abs=1.0)

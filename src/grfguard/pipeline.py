@@ -39,6 +39,7 @@ from grfguard.detect.system import (
     ImuTiltLearner,
     SwingZeroLearner,
     hold_unarmed_tests,
+    swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -314,8 +315,6 @@ class Monitor:
             return "the common-mode layer"
         if self.config.diagnostics:
             return "diagnostics"
-        if self.standing is not None:
-            return "the standing layer"
         if self.vfs is None:
             return ""
         if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
@@ -341,7 +340,7 @@ class Monitor:
                 prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
                                     self.guard, (self.inputs.force_lo, self.inputs.force_hi))
                 vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
-                k = MonitorKernel(prm, self.inputs, vk)
+                k = MonitorKernel(prm, self.inputs, vk, self.standing)
             except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
                 warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
                               "stages", RuntimeWarning, stacklevel=3)
@@ -384,6 +383,7 @@ class Monitor:
             self.vibration.reset()
             self.vfs_quiet.reset()
         self.detector.config = self.config
+        self._vib_active = False
 
     def _vibration_setup(self, vfs: Any) -> None:
         """``common_mode``: a twin virtual sensor without the accelerometer, used (with
@@ -404,6 +404,7 @@ class Monitor:
     def _vibration_on(self) -> None:
         """Switch the detector to the widened corner threshold (once)."""
         self.detector.config = self._quiet_config
+        self._vib_active = True
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
         if self.vfs is not None:
@@ -477,13 +478,16 @@ class Monitor:
                        for ce, cr in zip(p.cest, p.cref, strict=True)]
             z = self.zeros.update(p.x, p.tot, contact, flags)
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        v0, tot0 = list(p.v), list(p.tot)
+        swing_load_to_stance(x, v0, tot0, p.cref, self.robot.weight)
+        p = p._replace(v=v0, tot=tot0)
         if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
             self._tilt_seen = self._tilt_now
             self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
         if self._tilt_settle_s > 0.0:
             self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
-        cm = self.common.update(x, p.v, valid, frozen=frozen)
+        cm = self.common.update(x, p.v, valid, frozen=frozen, planned=p.cref)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]
@@ -497,7 +501,8 @@ class Monitor:
         if self.gyro_bias is not None and any(self._bias_now):
             bx, by, bz = self._bias_now
             reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
-        if self.vibration is not None and self.vibration.on:
+        if self._vib_active:
+            assert self.vibration is not None
             reasons.append(
                 f"accelerometer vibration (RMS {self.vibration.rms_m_s2:.1f} m/s^2 above "
                 f"{self.vibration.config.cutoff_hz:g} Hz): virtual sensor without it, corner "

@@ -119,6 +119,10 @@ class ModelCorrections:
         use_accelerometer: Whether the virtual sensor should fuse the accelerometer
             (False when it vibrates above ``ACC_QUIET_RMS``: its shaking would reach the
             per-corner forces; leg odometry alone is then the better estimate).
+        encoder_offset_deg: Offset of each joint encoder (joint name -> [deg]; the
+            reading minus the true angle). Individually they are poorly determined; what
+            the fit fixes is their effect on each sole's tilt, which is what the virtual
+            sensor's corner split needs.
     """
 
     mass_kg: float | None = None
@@ -137,6 +141,9 @@ class ModelCorrections:
     measured_mass: bool = False
     acc_vibration_rms_m_s2: float = 0.0
     use_accelerometer: bool = True
+    encoder_offset_deg: dict[str, float] = field(
+        default_factory=lambda: {j: 0.0 for j in JOINT_NAMES}
+    )
 
     def __post_init__(self) -> None:
         for name in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
@@ -144,9 +151,11 @@ class ModelCorrections:
             if len(v) != 3 or not all(math.isfinite(x) for x in v):
                 raise ConfigError(f"model_corrections.{name} = {v} must be 3 finite numbers")
             object.__setattr__(self, name, v)
-        for name in ("load_cell_gain", "load_cell_zero_n"):
+        for name, keys in (("load_cell_gain", SENSOR_NAMES),
+                           ("load_cell_zero_n", SENSOR_NAMES),
+                           ("encoder_offset_deg", JOINT_NAMES)):
             d = getattr(self, name)
-            missing = [s for s in SENSOR_NAMES if s not in d]
+            missing = [s for s in keys if s not in d]
             if missing:
                 raise ConfigError(f"model_corrections.{name} lacks sensor(s) {missing}")
         bad = {s: g for s, g in self.load_cell_gain.items() if not 0.2 < float(g) < 5.0}
@@ -196,7 +205,7 @@ class ModelCorrections:
                 lines.append(f"{k} = [{', '.join(repr(float(x)) for x in v)}]")
             else:
                 lines.append(f"{k} = {float(v)!r}")
-        for k in ("load_cell_gain", "load_cell_zero_n", "sigma"):
+        for k in ("load_cell_gain", "load_cell_zero_n", "encoder_offset_deg", "sigma"):
             lines.append(f"[model_corrections.{k}]")
             lines += [f'"{s}" = {float(v)!r}' for s, v in d[k].items()]
         return "\n".join(lines) + "\n"
@@ -334,6 +343,7 @@ def estimate_corrections(
     b_a = _fit_acc_bias(data, robot.gravity, sigma)
     R_BI = _fit_imu_mount(data, robot, zero, sigma)
     R_BI, enc = _fit_mount_and_encoders(data, robot, zero, R_BI, sigma)
+    data = [dataclasses.replace(d, q=d.q - enc) for d in data]
     vib = max(accelerometer_vibration_rms(d.acc, d.dt) for d in data)
 
     def build(mass: float, gains: np.ndarray, d_com: np.ndarray) -> ModelCorrections:
@@ -350,6 +360,8 @@ def estimate_corrections(
             measured_mass=measured_mass_kg is not None,
             acc_vibration_rms_m_s2=vib,
             use_accelerometer=vib < ACC_QUIET_RMS,
+            encoder_offset_deg={j: float(math.degrees(v))
+                                for j, v in zip(JOINT_NAMES, enc, strict=True)},
         )
 
     # gains/mass and trunk CoM twice: the second pass computes the relative CoM motion
@@ -665,9 +677,9 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
 
     IMU columns are rotated into the model's trunk frame after removing the biases
     (``acc_B = R_BI (acc - b_a)``, ``gyro_B = R_BI (gyro - b_g)``, ``R_WB = R_WI R_BI^T``),
-    forces become ``(f - z_i) / k_i``, and ``attrs["robot"]`` gets the corrected mass and
-    trunk CoM. ``attrs["model_corrections"]`` records what was applied. None returns
-    ``log`` unchanged.
+    forces become ``(f - z_i) / k_i``, joint angles ``q - offset``, and ``attrs["robot"]``
+    gets the corrected mass and trunk CoM. ``attrs["model_corrections"]`` records what was
+    applied. None returns ``log`` unchanged.
     """
     if corr is None:
         return log
@@ -687,6 +699,10 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
             qc = rotation_to_quat(quat_to_rotation(q[ok]) @ R_BI.T)
             qn[ok] = qc * np.where(qc[:, :1] < 0, -1.0, 1.0)
         out[list(IMU_QUAT)] = qn
+    for j, off in corr.encoder_offset_deg.items():
+        c = f"q_{j}"
+        if c in out.columns and off != 0.0:
+            out[c] = out[c].to_numpy(float) - math.radians(off)
     for s in SENSOR_NAMES:
         c = f"force_{s}"
         if c in out.columns:
