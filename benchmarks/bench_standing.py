@@ -128,7 +128,7 @@ def main() -> None:
     args = ap.parse_args()
     t0 = time.time()
     lines = [
-        "Faults injected 3 s into a stand in double support, into each of the 8 sensors; "
+        "Faults injected 3 s into a stand in double support, one run per sensor listed; "
         "default monitor (standing layer on) on the virtual-sensor columns. Delay = first "
         "flag of the faulty sensor after onset; *before* = the same runs with "
         "`Monitor(standing=False)` (the per-sensor tests alone wait for walking to "
@@ -198,6 +198,10 @@ def main() -> None:
                  f"{len(seeds) * gait.duration / 60:.2f} (whole log) | {n_ep8} |")
     lines += ["", "The fault-free walks of `benchmarks/bench_monitor.py` (10 min, 3 gaits) "
               "run with the standing layer on (it is part of the default monitor).", "",
+              "The gain's recovery maximum (about 11 N) comes from the weight transfer "
+              "before the first step: the stand has ended (weight shift), the flag is held "
+              "and the offset explanation is used until the load has changed enough to "
+              "tell a gain from an offset.", "",
               "Produced by `.venv/bin/python benchmarks/bench_standing.py` "
               f"({time.time() - t0:.0f} s on the shared 2-core machine)."]
     body = "\n".join(lines)
