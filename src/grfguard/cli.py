@@ -314,9 +314,9 @@ def _run_monitor(
     if is_described(df):  # Talos, G1, a robot TOML: the batch wrench estimator (issue 9)
         return run_described(df, cfg)
     if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
-        from grfguard.cli_calib import corrected_log
+        from grfguard.cli_calib import corrected_log_and_config
 
-        df = corrected_log(df, thresholds)
+        df, cfg = corrected_log_and_config(df, thresholds, cfg)
     return Monitor.for_log(df, config=cfg).run(df)
 
 
@@ -435,7 +435,7 @@ def calibrate(
     if model:  # model corrections first, thresholds on the corrected data (issue 10)
         from grfguard.cli_calib import fit_model_corrections
 
-        frames, corr_toml = fit_model_corrections(frames, mass, console)
+        frames, corr_toml, config = fit_model_corrections(frames, mass, console, config)
     th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")

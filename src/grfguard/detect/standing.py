@@ -64,6 +64,8 @@ class StandingConfig:
             (a weight shift) [-].
         clear_s: A flagged sensor whose deviation stays below half the threshold this
             long is cleared (the fault went away during the stand) [s].
+        hold_filter_s: Time constant over which, after the stand, the offset and the
+            gain explanation of a held flag are compared [s].
     """
 
     settle_s: float = 0.6
@@ -75,6 +77,7 @@ class StandingConfig:
     drift_rise_s: float = 0.2
     max_shift_fraction: float = 0.03
     clear_s: float = 1.0
+    hold_filter_s: float = 0.05
 
     def __post_init__(self) -> None:
         o = "standing"
@@ -87,6 +90,7 @@ class StandingConfig:
         check_number(o, "drift_rise_s", self.drift_rise_s, 0.0, 60.0, "s")
         check_number(o, "max_shift_fraction", self.max_shift_fraction, 0.0, 10.0, "")
         check_number(o, "clear_s", self.clear_s, 0.0, 3600.0, "s")
+        check_number(o, "hold_filter_s", self.hold_filter_s, 0.0, 60.0, "s")
 
 
 class StandingDetector:
@@ -114,6 +118,7 @@ class StandingDetector:
         self._tot_n = 0
         self._tot_base: np.ndarray | None = None
         self._lp = np.full(_N, np.nan)
+        self._xlp = np.full(_N, np.nan)
         self._over_s = np.zeros(_N)
         self._quiet_s = np.zeros(_N)
         self._half_t = np.full(_N, np.nan)
@@ -121,6 +126,16 @@ class StandingDetector:
         self.flags = np.zeros(_N, dtype=bool)
         self.kinds = ["none"] * _N
         self.eta_n = np.zeros(_N)
+
+    @property
+    def baseline_n(self) -> np.ndarray:
+        """(8,) residual baselines of the stand [N] (NaN before they are learnt)."""
+        return self._base.copy() if self._base is not None else np.full(_N, np.nan)
+
+    @property
+    def level_n(self) -> np.ndarray:
+        """(8,) low-passed readings [N] (NaN outside a stand)."""
+        return self._xlp.copy()
 
     @property
     def standing(self) -> bool:
@@ -181,6 +196,9 @@ class StandingDetector:
         self._lp[first] = d[first]
         upd = fin & ~first
         self._lp[upd] += self._a * (d[upd] - self._lp[upd])
+        xm = np.asarray(measured, dtype=float)
+        self._xlp[first] = xm[first]
+        self._xlp[upd] += self._a * (xm[upd] - self._xlp[upd])
         if self._ds_s < c.settle_s:
             return self.flags, self.kinds
         if self._base is None:
@@ -235,9 +253,15 @@ class StandingStage:
     edits the output row of the detector: a sensor the standing detector flags and the
     detector has not is flagged with the standing kind, ``eta_<s>`` = its deviation from
     the baseline [N] and ``recovered_<s>`` = reading − ``eta``. When the stand ends the
-    flag is held (``eta`` frozen) until the detector flags the sensor or until the
-    sensor's foot has completed a swing and then the other foot has (the per-sensor
-    swing and single-support tests had their chance and saw nothing).
+    flag is held until the detector flags the sensor or until the sensor's foot has
+    completed a swing and then the other foot has (the per-sensor swing and
+    single-support tests had their chance and saw nothing). While held, two explanations
+    of the standing deviation ``eta`` compete, as the load now changes: an offset
+    (``recovered = reading − eta``) and a gain ``g = level / (level − eta)`` (``level``
+    the reading at the end of the stand; ``recovered = reading / g``); the one closer to
+    the virtual sensor (plus the stand's baseline residual) over ``hold_filter_s`` wins
+    once it is ``threshold_n`` closer (in swing a gain reads zero, an offset ``eta``),
+    and the kind becomes ``gain``.
 
     Args:
         dt_s: Sampling period [s].
@@ -246,6 +270,8 @@ class StandingStage:
 
     def __init__(self, dt_s: float = 0.001, config: StandingConfig | None = None) -> None:
         self.detector = StandingDetector(dt_s, config)
+        tau = self.detector.config.hold_filter_s
+        self._a_hold = 1.0 if tau <= 0 else 1.0 - math.exp(-float(dt_s) / tau)
         self.reset()
 
     def reset(self) -> None:
@@ -254,6 +280,10 @@ class StandingStage:
         self.held = [False] * _N
         self.held_kind = ["none"] * _N
         self.held_eta = [0.0] * _N
+        self.held_gain = [math.nan] * _N
+        self.held_ref = [0.0] * _N  # baseline residual of the stand [N]
+        self._e_off = [0.0] * _N
+        self._e_gain = [0.0] * _N
         self._stage = [0] * _N  # 0: wait own swing, 1: wait other swing after it
         self._prev = [True, True]
         self._lifted = [False, False]
@@ -269,6 +299,23 @@ class StandingStage:
                 self._lifted[f] = False
             self._prev[f] = contact[f]
         return done
+
+    def _held(self, i: int, xi: float, vi: float) -> tuple[str, float]:
+        """Kind and ``eta`` [N] of held sensor ``i`` at reading ``xi``, virtual force
+        ``vi`` [N]: offset or gain, whichever explains the reading better."""
+        eta, g = self.held_eta[i], self.held_gain[i]
+        if self.held_kind[i] == "gain":
+            return "gain", xi - xi / g if math.isfinite(xi) else eta
+        if (math.isfinite(g) and g > 0 and self.held_kind[i] == "offset"
+                and math.isfinite(xi) and math.isfinite(vi)):
+            ref = vi + self.held_ref[i]
+            a = self._a_hold
+            self._e_off[i] += a * (abs(xi - eta - ref) - self._e_off[i])
+            self._e_gain[i] += a * (abs(xi / g - ref) - self._e_gain[i])
+            if self._e_off[i] - self._e_gain[i] > self.detector.config.threshold_n:
+                self.held_kind[i] = "gain"
+                return "gain", xi - xi / g
+        return self.held_kind[i], eta
 
     def step(
         self, x: Sequence[float], v: Sequence[float], tot: Sequence[float],
@@ -289,6 +336,8 @@ class StandingStage:
         was = det.flags.copy()
         kinds_before = list(det.kinds)
         eta_before = det.eta_n.copy()
+        base_before = det.baseline_n
+        level_before = det.level_n
         flags, kinds = det.update(x, v, contact[0] and contact[1], tot)
         done = self._swings(contact)
         for i in range(_N):
@@ -296,6 +345,12 @@ class StandingStage:
                 self.held[i] = True
                 self.held_kind[i] = kinds_before[i]
                 self.held_eta[i] = float(eta_before[i])
+                load = float(level_before[i] - eta_before[i])
+                self.held_gain[i] = (float(level_before[i]) / load
+                                     if load > det.config.threshold_n else math.nan)
+                self.held_ref[i] = float(base_before[i]) if math.isfinite(
+                    base_before[i]) else 0.0
+                self._e_off[i] = self._e_gain[i] = 0.0
                 self._stage[i] = 0
         for i in range(_N):
             flagged = bool(out.get(_FLAG_COLS[i], False))
@@ -313,7 +368,7 @@ class StandingStage:
                 self.held[i] = False
                 kind, eta = kinds[i], float(det.eta_n[i])
             elif self.held[i]:
-                kind, eta = self.held_kind[i], self.held_eta[i]
+                kind, eta = self._held(i, float(x[i]), float(v[i]))
             else:
                 continue
             out[_FLAG_COLS[i]] = True
