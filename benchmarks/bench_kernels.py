@@ -34,13 +34,13 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import mujoco
 import numpy as np
 from _common import update_section
 
 from grfguard.detect import Monitor, MonitorConfig
-from grfguard.estimate.compliance import _solve_core
 from grfguard.estimate.vfs import VirtualForceSensor
 from grfguard.kernels import CompiledVirtualForceSensor, vfs_batch, warm_up
 from grfguard.kernels.fk import TreeModel, fk_batch
@@ -48,7 +48,10 @@ from grfguard.kernels.nnls import new_scratch, prior_qp
 from grfguard.kernels.vfs import log_to_array
 from grfguard.model.mjcf import build_model
 from grfguard.model.robot import SURALP
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
+from reference.nnls_split import nnls_prior_qp as _solve_core  # noqa: E402  (scipy nnls)
 
 SECTION = "## Compiled kernels"
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
@@ -132,7 +135,7 @@ def main() -> None:
     X = np.ascontiguousarray(np.tile(X1, (reps, 1))[: a.samples])
 
     # ---------------------------------------------------------------- accuracy
-    ref_df = VirtualForceSensor.for_log(walk).run(walk)
+    ref_df = VirtualForceSensor.for_log(walk, compiled=False).run(walk)
     t0 = time.perf_counter()
     out_df = vfs_batch(walk)
     force_cols = [c for c in ref_df.columns if c.startswith(("vfs_r", "vfs_l", "vfs_total"))]
@@ -149,7 +152,7 @@ def main() -> None:
     n_dict = min(20_000, len(rows))
     cv.reset()
     dic = per_sample(lambda i: cv.update(rows[i]), n_dict)
-    py = VirtualForceSensor.for_log(walk)
+    py = VirtualForceSensor.for_log(walk, compiled=False)
     n_ref = 1500
     ref = per_sample(lambda i: py.update(rows[i]), n_ref)
     # streaming == batch on the stream just run
@@ -161,7 +164,7 @@ def main() -> None:
     # ---------------------------------------------------------------- whole monitor (stream)
     mcfg = MonitorConfig()
     mon_c = Monitor(mcfg, CompiledVirtualForceSensor.for_log(walk, mcfg.vfs))
-    mon_p = Monitor(mcfg, VirtualForceSensor.for_log(walk, mcfg.vfs))
+    mon_p = Monitor(mcfg, VirtualForceSensor.for_log(walk, mcfg.vfs, compiled=False))
     mon_c_t = per_sample(lambda i: mon_c.update(rows[i]), 5000)
     mon_p_t = per_sample(lambda i: mon_p.update(rows[i]), 1000)
 
@@ -174,13 +177,13 @@ def main() -> None:
     b_cpu = X.shape[0] / (time.process_time() - c0)
     short = walk.iloc[:3000]
     t0 = time.perf_counter()
-    VirtualForceSensor.for_log(short).run(short)
+    VirtualForceSensor.for_log(short, compiled=False).run(short)
     b_ref = len(short) / (time.perf_counter() - t0)
     t0 = time.perf_counter()
     Monitor(mcfg, CompiledVirtualForceSensor.for_log(walk, mcfg.vfs)).run(walk)
     m_run_c = n_walk / (time.perf_counter() - t0)
     t0 = time.perf_counter()
-    Monitor(mcfg, VirtualForceSensor.for_log(short, mcfg.vfs)).run(short)
+    Monitor(mcfg, VirtualForceSensor.for_log(short, mcfg.vfs, compiled=False)).run(short)
     m_run_p = len(short) / (time.perf_counter() - t0)
 
     # ---------------------------------------------------------------- kinematics

@@ -225,7 +225,7 @@ def main() -> None:
         "swing duration is known; the first single support after the start (unknown "
         "touchdown time of the other foot) gave the only large foot-total excursions and is "
         "skipped;",
-        f"- frozen/stuck/clipped: {th.const_samples} identical readings of a loaded sensor (a "
+        f"- frozen/stuck/clipped: the same reading of a loaded sensor for {th.const_s} s (a "
         "healthy load cell always shows noise).",
         "",
         "### Detection on the 60 s default walk (seed 0)",

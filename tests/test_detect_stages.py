@@ -93,10 +93,10 @@ def test_dropout_clears_after_a_fifth_of_clear_s() -> None:
 
 
 def test_constant_reading_alarms_only_when_loaded() -> None:
-    th = Thresholds()
+    n = DetectTuning().const_samples(Thresholds().const_s, 1e-3)
     for loaded, expect in ((True, True), (False, False)):
         s = SensorState()
-        hits = [constant_test(s, 123.0, loaded, th.const_samples) for _ in range(th.const_samples)]
+        hits = [constant_test(s, 123.0, loaded, n) for _ in range(n)]
         assert hits[-1] is expect and not any(hits[:-1])
 
 

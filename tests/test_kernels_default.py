@@ -45,12 +45,13 @@ def _compare(ref: pd.DataFrame, out: pd.DataFrame) -> None:
 
 def test_for_log_default_is_compiled_and_opt_out_is_python(broken_log) -> None:
     assert isinstance(Monitor.for_log(broken_log).vfs, CompiledVirtualForceSensor)
+    assert Monitor.for_log(broken_log).vfs.compiled
     for mon in (Monitor.for_log(broken_log, compiled=False),
                 Monitor.for_log(broken_log, MonitorConfig(compiled=False))):
-        assert type(mon.vfs) is VirtualForceSensor
-    # settings the kernel does not cover keep the Python sensor
+        assert type(mon.vfs) is VirtualForceSensor and not mon.vfs.compiled
+    # settings the kernel does not cover keep the Python stages
     paper = Monitor.for_log(broken_log, MonitorConfig(vfs=VFSConfig.paper()))
-    assert type(paper.vfs) is VirtualForceSensor
+    assert type(paper.vfs) is VirtualForceSensor and not paper.vfs.compiled
     assert MonitorConfig.from_toml_text(MonitorConfig(compiled=False).to_toml()).compiled is False
 
 

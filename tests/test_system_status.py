@@ -44,7 +44,7 @@ def exact():
 def test_mass_error_raises_model_mismatch_with_the_ratio():
     df = simulate(gait=GAIT, seed=4, reality=RealityGap(mass_error=0.05))
     share, last = _status(df, _vfs(df))
-    assert share > 0.5
+    assert share > 0.35  # from 2 s of single support on (first at 1.2 s)
     assert last.model_mismatch and "total force off by +" in last.reason
     assert last.ratio == pytest.approx(0.05, abs=0.02)
     # the correction explains the common residual: corrected VFS total ~ measured total

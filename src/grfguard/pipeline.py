@@ -28,14 +28,18 @@ import numpy as np
 import pandas as pd
 
 from grfguard.detect.config import MonitorConfig, config_for_log
-from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector, DetectorInputs
+from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector
 from grfguard.detect.paper import PaperDetector
+from grfguard.detect.standing import StandingConfig, StandingStage
 from grfguard.detect.system import (
+    AccVibrationDetector,
     CommonModeConfig,
     CommonModeMonitor,
     GyroBiasLearner,
     ImuTiltLearner,
     SwingZeroLearner,
+    hold_unarmed_tests,
+    swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -57,6 +61,7 @@ from grfguard.rotations import quat_to_matrix, rotation_to_quat
 __all__ = ["Monitor"]
 
 _NAN = float("nan")
+_UNSET = object()
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
@@ -100,6 +105,24 @@ def _robot_by_mass(log: pd.DataFrame) -> RobotConfig:
     return RobotConfig()
 
 
+def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
+    """A copy of ``log`` with the columns ``new`` (replaced in place when ``log`` has
+    them, else appended in order), built in one go."""
+    add = pd.DataFrame(dict(new), index=log.index)
+    if not any(c in log.columns for c in new):
+        return pd.concat([log, add], axis=1)
+    order = list(log.columns) + [c for c in new if c not in log.columns]
+    keep = log.drop(columns=[c for c in new if c in log.columns])
+    return pd.concat([keep, add], axis=1)[order]
+
+
+def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
+    """Whether the log carries the gyro and the planned contact (the compiled virtual
+    sensor's switches)."""
+    return (all(c in log.columns for c in IMU_GYRO),
+            all(f"contact_ref_{s}" in log.columns for s in SIDES))
+
+
 class _Prepared(NamedTuple):
     """One sample after the guards: the detector's arguments and the system state."""
 
@@ -114,21 +137,42 @@ class _Prepared(NamedTuple):
     reason: str
 
 
-def _compiled_or(vfs: Any) -> Any:
-    """The compiled twin of ``vfs`` (kernels compiled or loaded now) when the kernel covers
-    its settings; ``vfs`` itself otherwise or when the kernels cannot be built here (e.g.
-    the cache cannot be written: a warning, the run goes on with the Python sensor)."""
-    from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, warm_up
+class _PreparedFrame(NamedTuple):
+    """The guards' verdicts over a whole log (arrays, one row per sample)."""
 
-    if not VFSKernel.supports(vfs.config):
+    clock: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    tot: np.ndarray
+    cref: np.ndarray
+    cest: np.ndarray
+    implausible: np.ndarray
+    state: np.ndarray
+    reason: np.ndarray
+
+    def sample(self, k: int) -> _Prepared:
+        """Sample ``k`` as a :class:`_Prepared`."""
+        return _Prepared(float(self.clock[k]), self.x[k].tolist(), self.v[k].tolist(),
+                         self.tot[k].tolist(), self.cref[k].tolist(), self.cest[k].tolist(),
+                         self.implausible[k].tolist(), str(self.state[k]),
+                         str(self.reason[k]))
+
+
+def _compiled_or(vfs: Any) -> Any:
+    """``vfs`` with its kernels compiled or loaded now when it runs compiled; the same
+    sensor on the Python stages when the kernels cannot be built here (e.g. the cache
+    cannot be written: a warning, the run goes on)."""
+    from grfguard.kernels import warm_up
+
+    if not vfs.compiled:
         return vfs
     try:
         warm_up()
     except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
         warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
-                      "pure-Python one", RuntimeWarning, stacklevel=3)
-        return vfs
-    return CompiledVirtualForceSensor(vfs.robot, vfs.config, vfs.kin)
+                      "Python stages", RuntimeWarning, stacklevel=3)
+        return type(vfs)(vfs.robot, vfs.config, vfs.kin, compiled=False)
+    return vfs
 
 
 class Monitor:
@@ -155,6 +199,10 @@ class Monitor:
         guard: Settings of the input and time guards.
         robot: Robot description for the physical ranges (default: the VFS's robot, or
             SURALP).
+        common_mode: Settings of the system-level common-mode fit (False: off).
+        standing: Settings of the standing layer
+            (:class:`~grfguard.detect.standing.StandingStage`: faults that start while
+            both feet stand; True: default settings, False: off).
 
     Example:
         >>> mon = Monitor.for_log(log)
@@ -171,9 +219,14 @@ class Monitor:
         guard: GuardConfig | None = None,
         robot: RobotConfig | None = None,
         common_mode: CommonModeConfig | bool = False,
+        standing: StandingConfig | bool = True,
+        compiled: bool | None = None,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
+        self.compiled = self.config.compiled if compiled is None else bool(compiled)
+        self._kernels: dict[tuple[bool, bool], Any] = {}
+        self._kernels_for: Any = _UNSET
         self.guard = guard if guard is not None else GuardConfig()
         if robot is None:
             robot = getattr(vfs, "robot", None) or RobotConfig()
@@ -184,10 +237,17 @@ class Monitor:
         self.inputs = InputGuard(robot, self.guard)
         self.time_guard = TimeGuard(self.config.dt_s, self.guard)
         self.continuity = Continuity(self.guard.settle_s)
+        # standing layer (issue 10): faults that start while both feet stand
+        self.standing: StandingStage | None = None
+        if standing is not False:
+            self.standing = StandingStage(self.config.dt_s, standing if isinstance(
+                standing, StandingConfig) else None)
         self.common: CommonModeMonitor | None = None
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
         self.tilt: ImuTiltLearner | None = None
+        self.vibration: AccVibrationDetector | None = None
+        self.vfs_quiet: Any = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
@@ -197,13 +257,15 @@ class Monitor:
             if kin is not None and hasattr(kin, "forward"):
                 self.tilt = ImuTiltLearner(kin, self.config.dt_s, learn_s=0.2,
                                            apply_after_s=0.1, every_n=5)
+            self._vibration_setup(vfs)
         self.reset()
 
     @classmethod
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
                 guard: GuardConfig | None = None,
                 common_mode: CommonModeConfig | bool = False,
-                compiled: bool | None = None) -> Monitor:
+                compiled: bool | None = None,
+                standing: StandingConfig | bool = True) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
         the robot (physical ranges) from ``log.attrs``.
@@ -222,29 +284,85 @@ class Monitor:
         if not has_vfs:
             from grfguard.estimate.vfs import VirtualForceSensor
 
-            vfs = VirtualForceSensor.for_log(log, cfg.vfs)
-            if cfg.compiled if compiled is None else compiled:
-                vfs = _compiled_or(vfs)
+            vfs = _compiled_or(VirtualForceSensor.for_log(
+                log, cfg.vfs, compiled=cfg.compiled if compiled is None else compiled))
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
             robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
-        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode)
+        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
+                   standing=standing, compiled=compiled)
 
     @property
     def sensors(self) -> list[Any]:
         """Per-sensor state of the default detector."""
+        k = self._kernel()
+        if k is not None:
+            from grfguard.kernels.detect import sensor_states
+
+            return sensor_states(k.ss)
         return self.detector.sensors
+
+    def compiled_reason(self) -> str:
+        """Empty when the whole monitor runs compiled (:mod:`grfguard.kernels.monitor`:
+        guards, virtual sensor, default detector and recovery in one compiled step);
+        otherwise why it runs the pure-Python stages."""
+        if not self.compiled:
+            return "compiled=False"
+        if self.config.method != "default":
+            return f"method {self.config.method!r}"
+        if self.common is not None:
+            return "the common-mode layer"
+        if self.config.diagnostics:
+            return "diagnostics"
+        if self.vfs is None:
+            return ""
+        if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
+            return "a pure-Python virtual force sensor"
+        return ""
+
+    def _kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
+        """The compiled monitor step for inputs with / without gyro and planned contact
+        (None when the monitor runs the Python stages)."""
+        if self._kernels_for is not self.vfs:
+            self._kernels = {}
+            self._kernels_for = self.vfs
+            self._compiled_ok = not self.compiled_reason()
+        if not self._compiled_ok:
+            return None
+        key = (has_gyro, has_ref)
+        k = self._kernels.get(key)
+        if k is None:
+            try:
+                from grfguard.kernels.detect import detect_params
+                from grfguard.kernels.monitor import MonitorKernel
+
+                prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
+                                    self.guard, (self.inputs.force_lo, self.inputs.force_hi))
+                vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
+                k = MonitorKernel(prm, self.inputs, vk, self.standing)
+            except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
+                warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
+                              "stages", RuntimeWarning, stacklevel=3)
+                self._compiled_ok = False
+                return None
+            self._kernels[key] = k
+        return k
 
     def reset(self) -> None:
         """Forget everything (filters, flags, contact timeline, VFS state, guards)."""
         if self.vfs is not None:
             self.vfs.reset()
+        if self._kernels_for is self.vfs:
+            for k in self._kernels.values():
+                k.reset()
         self.detector.reset()
         self.paper.reset()
         self.recovery.reset()
         self.time_guard.reset()
         self.continuity.reset()
+        if self.standing is not None:
+            self.standing.reset()
         if self.common is not None:
             self.common.reset()
         if self.zeros is not None:
@@ -261,6 +379,32 @@ class Monitor:
         self._tilt_rows: np.ndarray | None = None
         self._eye = self.tilt.rotation if self.tilt is not None else None
         self._spike = [False] * len(SENSOR_NAMES)
+        if self.vibration is not None:
+            self.vibration.reset()
+            self.vfs_quiet.reset()
+        self.detector.config = self.config
+        self._vib_active = False
+
+    def _vibration_setup(self, vfs: Any) -> None:
+        """``common_mode``: a twin virtual sensor without the accelerometer, used (with
+        the corner threshold widened) once the accelerometer vibrates
+        (:class:`~grfguard.detect.system.AccVibrationDetector`)."""
+        import dataclasses
+
+        cfg = getattr(vfs, "config", None)
+        if vfs is None or not getattr(cfg, "use_accelerometer", False):
+            return
+        self.vibration = AccVibrationDetector(self.config.dt_s)
+        self.vfs_quiet = type(vfs)(vfs.robot, dataclasses.replace(cfg, use_accelerometer=False),
+                                   vfs.kin)
+        th = self.config.thresholds
+        self._quiet_config = self.config.with_thresholds(dataclasses.replace(
+            th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))
+
+    def _vibration_on(self) -> None:
+        """Switch the detector to the widened corner threshold (once)."""
+        self.detector.config = self._quiet_config
+        self._vib_active = True
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
         if self.vfs is not None:
@@ -308,6 +452,8 @@ class Monitor:
             return self.paper.step(t, x, v)
         det = self.detector.step(t, x, v, tot, cref, cest)
         out = self.recovery.step(self.detector.sensors, x, v, tot, det.columns)
+        if self.standing is not None:
+            self.standing.step(x, v, tot, cref, cest, out)
         if det.diagnostics:
             out.update(det.diagnostics)
         return out
@@ -332,23 +478,35 @@ class Monitor:
                        for ce, cr in zip(p.cest, p.cref, strict=True)]
             z = self.zeros.update(p.x, p.tot, contact, flags)
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        v0, tot0 = list(p.v), list(p.tot)
+        swing_load_to_stance(x, v0, tot0, p.cref, self.robot.weight)
+        p = p._replace(v=v0, tot=tot0)
         if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
             self._tilt_seen = self._tilt_now
             self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
         if self._tilt_settle_s > 0.0:
             self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
-        cm = self.common.update(x, p.v, valid, frozen=frozen)
+        cm = self.common.update(x, p.v, valid, frozen=frozen, planned=p.cref)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
+        if self.zeros is not None:
+            hold_unarmed_tests(self.detector, [self.zeros.armed(f) for f in range(2)],
+                               self.common.armed)
         out = self._step(p.clock, x, v, tot, p.cref, p.cest)
         reasons = [cm.reason] if cm.reason else []
         if self.gyro_bias is not None and any(self._bias_now):
             bx, by, bz = self._bias_now
             reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
+        if self._vib_active:
+            assert self.vibration is not None
+            reasons.append(
+                f"accelerometer vibration (RMS {self.vibration.rms_m_s2:.1f} m/s^2 above "
+                f"{self.vibration.config.cutoff_hz:g} Hz): virtual sensor without it, corner "
+                f"threshold x{self.vibration.config.corner_sigma_scale:g}")
         if any(self._tilt_now):
             reasons.append("IMU mounting tilt (roll {:+.1f}, pitch {:+.1f}) deg removed".format(
                 *self._tilt_now))
@@ -393,6 +551,11 @@ class Monitor:
         """
         if not isinstance(row, Mapping):
             row = {}
+        k = self._kernel()
+        if k is not None:
+            from grfguard.kernels.monitor import update_dict
+
+            return update_dict(self, k, row)
         t_raw = _f(row, TIME)
         clean, reason = self.inputs.clean_row(row)
         if self.gyro_bias is not None:
@@ -405,7 +568,17 @@ class Monitor:
                 self._vfs_resync()
             else:
                 self.vfs.reset()
+            if self.vfs_quiet is not None:
+                self.vfs_quiet.reset()
         vout = self._vfs_row(clean)
+        if self.vibration is not None:
+            try:
+                vq = self.vfs_quiet.update(clean)
+            except Exception:  # noqa: BLE001 - a bad sample must never raise
+                vq = {}
+            if self.vibration.update(_f(clean, IMU_ACC[0]), _f(clean, IMU_ACC[1])):
+                vout = vq
+                self._vibration_on()
         src = vout if self.vfs is not None else clean
         v = [_f(src, vfs_col(s)) for s in SENSOR_NAMES]
         tot = [_f(src, c) for c in VFS_TOTAL_COLUMNS]
@@ -422,6 +595,65 @@ class Monitor:
         out: dict[str, Any] = dict(vout)
         out.update(res)
         return out
+
+    @property
+    def input_columns(self) -> tuple[str, ...]:
+        """Layout of the input row of :meth:`update_array`: ``time``, the eight
+        ``force_<s>``, then the virtual sensor's inputs (joint angles, IMU, planned
+        contact: :data:`grfguard.kernels.vfs.IN_COLUMNS`) or, for a monitor without a
+        virtual sensor, the precomputed ``contact_ref_*``, ``vfs_*``, ``vfs_total_*``,
+        ``contact_est_*``, ``vfs_valid`` (:mod:`grfguard.kernels.monitor`)."""
+        from grfguard.kernels.monitor import input_columns
+
+        return input_columns(self.vfs is not None)
+
+    @property
+    def output_columns(self) -> tuple[str, ...]:
+        """Layout of the output row of :meth:`update_array`: the 22 virtual-sensor outputs
+        (with a virtual sensor inside), then ``flag_<s>`` (0/1), ``kind_<s>`` (index into
+        :data:`grfguard.kernels.detect.KIND_NAMES`), ``eta_<s>`` [N], ``recovered_<s>``
+        [N] for the eight sensors, and ``system_state`` (index into
+        :data:`grfguard.guard.SYSTEM_STATES`)."""
+        from grfguard.kernels.monitor import output_columns
+
+        return output_columns(self.vfs is not None)
+
+    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample as arrays (the fast streaming call): ``x`` in
+        :attr:`input_columns` order -> ``y`` in :attr:`output_columns` order (written into
+        ``y`` when given, a contiguous float64 array). Same numbers as :meth:`update`
+        (without the ``system_reason`` text); never raises on a bad sample. One compiled
+        call when the monitor runs compiled (:meth:`compiled_reason`), else through
+        :meth:`update`.
+
+        Raises:
+            LogFormatError: If ``x`` or ``y`` has the wrong length.
+        """
+        k = self._kernel()
+        n_in = len(self.input_columns)
+        n_out = len(self.output_columns)
+        if y is None:
+            y = np.empty(n_out)
+        if k is not None and type(x) is np.ndarray and x.shape == (n_in,) and \
+                x.dtype == np.float64 and x.flags.c_contiguous and y.shape == (n_out,) and \
+                y.dtype == np.float64 and y.flags.c_contiguous:
+            return k.step(x, y)
+        x = np.ascontiguousarray(x, dtype=float).ravel()
+        if x.shape != (n_in,) or y.shape != (n_out,):
+            raise LogFormatError(
+                f"Monitor.update_array takes an input row of {n_in} values in "
+                f"Monitor.input_columns order and an output row of {n_out}; got shapes "
+                f"{x.shape} and {y.shape}")
+        if k is not None:
+            yy = np.empty(n_out)
+            k.step(x, yy)
+            y[:] = yy
+            return y
+        from grfguard.kernels.monitor import dict_to_row
+
+        y[:] = dict_to_row(self.update(dict(zip(self.input_columns, x.tolist(),
+                                                strict=True))), self.output_columns)
+        return y
 
     def _unbias_row(self, clean: dict[str, Any]) -> None:
         """Subtract the learned gyro bias from one cleaned row (in place)."""
@@ -555,6 +787,20 @@ class Monitor:
                 f"Monitor.run: the log lacks column(s) {missing}; see grfguard.io.schema"
             )
         self.reset()
+        if self.vfs is not None:
+            self.vfs.check_columns(log.columns)
+        k = self._kernel(*_has_gyro_ref(log))
+        if k is not None:
+            from grfguard.kernels.monitor import run_frame
+
+            out = run_frame(self, k, log)
+            out.attrs = {**log.attrs, "monitor": self.describe()}
+            return out
+        attrs = log.attrs
+        # the stages read columns only: without the metadata pandas would otherwise
+        # deep-copy on every column access (a large cost on long logs)
+        log = log.copy(deep=False)
+        log.attrs = {}
         n = len(log)
         clean, reasons = self.inputs.clean_frame(log)
         if self.gyro_bias is not None and all(c in clean for c in IMU_GYRO):
@@ -566,8 +812,8 @@ class Monitor:
         if self.vfs is not None:
             self.vfs.check_columns(log.columns)
             valid_in = self.vfs.input_valid(clean) if n else np.zeros(0, bool)
-            for k in range(1, n):
-                resets[k] = times[k][1] == "time_gap" or not valid_in[k - 1]
+            gap = np.array([q[1] == "time_gap" for q in times], dtype=bool)
+            resets[1:] = gap[1:] | ~np.asarray(valid_in[:-1], dtype=bool)
             if not resets.any():
                 vdf = self.vfs.run(clean)
                 self.vfs.reset()
@@ -575,47 +821,142 @@ class Monitor:
                 vdf = self._vfs_batch(clean, resets)
             else:
                 vdf = self._vfs_reset_segments(clean, resets)
-        inp = DetectorInputs.from_frames(clean, vdf if vdf is not None else clean)
-        x_raw = [pd.to_numeric(log[force_col(s)], errors="coerce").to_numpy(float).tolist()
-                 for s in SENSOR_NAMES]
-        src = vdf if vdf is not None else clean
-        flag = (src["vfs_valid"].to_numpy(dtype=float).tolist() if "vfs_valid" in src
-                else [_NAN] * n)
-        prepared = []
-        for k in range(n):
-            t, x, v, tot, cref, cest = inp.sample(k)
-            clock, tstate, jump = times[k]
-            if self.vfs is None:
-                resets[k] = self.continuity.before(tstate)
-            else:
-                self.continuity.before(tstate)
-            prepared.append(self._prepare(
-                t_raw[k], clock, tstate, jump, reasons[k], bool(resets[k]),
-                self._valid(flag[k], v, tot), [c[k] for c in x_raw], x, v, tot, cref, cest))
+        k_vib = n
+        if self.vibration is not None and vdf is not None:
+            k_vib = self.vibration.run(
+                pd.to_numeric(clean[IMU_ACC[0]], errors="coerce").to_numpy(float),
+                pd.to_numeric(clean[IMU_ACC[1]], errors="coerce").to_numpy(float))
+            if k_vib < n:
+                vq = self.vfs_quiet.run(clean)
+                self.vfs_quiet.reset()
+                vdf = vdf.copy()
+                qcols = [c for c in vdf.columns if c in vq.columns]
+                vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
+        prep = self._prepare_frame(log, clean, vdf if vdf is not None else clean, times,
+                                   reasons, resets)
         if self.config.method == "paper":
-            pres = self.paper.run(
-                np.array([p.clock for p in prepared]), np.array([p.x for p in prepared]),
-                np.array([p.v for p in prepared]))
-            cols = list(pres)
-            rows = [{c: pres[c][k] for c in cols} for k in range(n)]
+            res = self.paper.run(prep.clock, prep.x, prep.v)
+            cols: dict[str, Any] = {c: np.asarray(res[c]) for c in res}
         else:
             rows = []
-            for k, p in enumerate(prepared):
+            for k in range(n):
                 if self._bias_rows is not None:
                     self._bias_now = tuple(float(q) for q in self._bias_rows[k])
                 if self._tilt_rows is not None:
                     self._tilt_now = tuple(float(q) for q in self._tilt_rows[k])
-                rows.append(self._detect(p))
-        rows = [self._finish(r, p) for r, p in zip(rows, prepared, strict=True)]
-        res = pd.DataFrame(rows, index=log.index) if rows else pd.DataFrame(index=log.index)
-        out = log.copy()
+                if k == k_vib:
+                    self._vibration_on()
+                rows.append(self._detect(prep.sample(k)))
+            res_df = pd.DataFrame(rows) if rows else pd.DataFrame()
+            cols = {c: res_df[c].to_numpy() for c in res_df.columns}
+        cols = self._finish_frame(cols, prep)
+        new: dict[str, Any] = {}
         if vdf is not None:
             for c in vdf.columns:
-                out[c] = vdf[c].to_numpy()
-        for c in res.columns:
-            out[c] = res[c].to_numpy()
-        out.attrs = {**log.attrs, "monitor": self.describe()}
+                new[c] = vdf[c].to_numpy()
+        new.update(cols)
+        out = _with_columns(log, new)
+        out.attrs = {**attrs, "monitor": self.describe()}
         return out
+
+    def _prepare_frame(self, log: pd.DataFrame, clean: pd.DataFrame, src: pd.DataFrame,
+                       times: list[tuple[float, str, float]], reasons: list[str],
+                       resets: np.ndarray) -> _PreparedFrame:
+        """:meth:`_prepare` over the whole log at once (same verdicts, as arrays):
+        ``clean`` is the guarded log, ``src`` the frame with the VFS outputs."""
+        n = len(log)
+
+        def cols(frame: pd.DataFrame, names: Any, numeric: bool = False) -> np.ndarray:
+            out = np.full((n, len(names)), np.nan)
+            for j, c in enumerate(names):
+                if c in frame.columns:
+                    out[:, j] = (pd.to_numeric(frame[c], errors="coerce").to_numpy(float)
+                                 if numeric else frame[c].to_numpy(dtype=float))
+            return out
+
+        t_raw = pd.to_numeric(log[TIME], errors="coerce").to_numpy(dtype=float)
+        clock = np.array([q[0] for q in times], dtype=float)
+        tstate = [q[1] for q in times]
+        x = cols(clean, [force_col(s) for s in SENSOR_NAMES])
+        v = cols(src, [vfs_col(s) for s in SENSOR_NAMES])
+        tot = cols(src, VFS_TOTAL_COLUMNS)
+        cref = cols(clean, [f"contact_ref_{s}" for s in SIDES])
+        cest = cols(src, [f"contact_est_{s}" for s in SIDES])
+        x_raw = cols(log, [force_col(s) for s in SENSOR_NAMES], numeric=True)
+        flag = cols(src, ["vfs_valid"])[:, 0]
+        if self.vfs is not None:
+            valid = flag == 1.0
+        else:
+            fin = np.isfinite(v).all(axis=1) & np.isfinite(tot).all(axis=1)
+            valid = np.where(np.isfinite(flag), flag == 1.0, fin)
+            gap = np.array([s == "time_gap" for s in tstate], dtype=bool)
+            resets = np.zeros(n, dtype=bool)
+            resets[1:] = gap[1:] | ~valid[:-1]
+        lo, hi = self.inputs.force_lo, self.inputs.force_hi
+        with np.errstate(invalid="ignore"):
+            bounded = (np.isnan(v) | ((v >= lo) & (v <= hi))).all(axis=1) & (
+                np.isnan(tot) | ((tot >= 2 * lo) & (tot <= 2 * hi))).all(axis=1)
+            implausible = ~np.isnan(x_raw) & ~((x_raw >= lo) & (x_raw <= hi))
+        # the clock of the last reset at or before each sample (Continuity.after)
+        idx = np.where(resets, np.arange(n), -1)
+        last = np.maximum.accumulate(idx) if n else idx
+        rclock = np.where(last >= 0, clock[np.maximum(last, 0)], np.nan)
+        with np.errstate(invalid="ignore"):
+            settling = np.isfinite(rclock) & (clock - rclock < self.continuity.settle_s - 1e-12)
+        use = valid & ~settling & bounded
+        v = np.where(use[:, None], v, np.nan)
+        tot = np.where(use[:, None], tot, np.nan)
+        cest = np.where(use[:, None], cest, np.nan)
+        state = np.array(tstate, dtype=object)
+        reason = np.array(reasons, dtype=object) if n else np.zeros(0, dtype=object)
+        ok_t = state == "ok"
+        for k in np.flatnonzero(~ok_t):
+            jump = times[k][2]
+            r = (f"time stamp {t_raw[k]:.6g} s: step {jump:+.6g} s" if math.isfinite(jump)
+                 else "time stamp missing")
+            reason[k] = r + (f"; {reason[k]}" if reason[k] else "")
+        bad_in = ok_t & ~(valid & bounded)
+        state[bad_in] = "input_invalid"
+        for k in np.flatnonzero(bad_in & (reason == "")):
+            reason[k] = ("estimator inputs missing or not finite" if not valid[k]
+                         else "virtual forces outside the physical range")
+        sett = ok_t & ~bad_in & ~use
+        state[sett] = "settling"
+        reason[sett & (reason == "")] = "virtual sensor settling after a break"
+        if n:  # the streaming state after the last sample (update may continue)
+            c = self.continuity
+            c._started = True
+            c._prev_invalid = not bool(valid[-1])
+            c._reset_clock = float(rclock[-1])
+        return _PreparedFrame(clock, x, v, tot, cref, cest, implausible, state, reason)
+
+    def _finish_frame(self, cols: dict[str, Any], prep: _PreparedFrame) -> dict[str, Any]:
+        """:meth:`_finish` over the whole log (kinds of out-of-range readings, recovered
+        force within range, system state)."""
+        n = len(prep.clock)
+        for i in range(len(SENSOR_NAMES)):
+            fc = _FLAG_COLS[i]
+            flagged = (np.asarray(cols[fc], dtype=bool) if fc in cols
+                       else np.zeros(n, dtype=bool))
+            imp = prep.implausible[:, i]
+            # spike latch: set by an implausible reading, kept while flagged
+            known = imp | ~flagged
+            idx = np.where(known, np.arange(n), -1)
+            last = np.maximum.accumulate(idx) if n else idx
+            spike = np.where(last >= 0, imp[np.maximum(last, 0)], False)
+            kc = _KIND_COLS[i]
+            if kc in cols and (spike & flagged).any():
+                kinds = np.asarray(cols[kc], dtype=object).copy()
+                kinds[spike & flagged] = "spikes"
+                cols[kc] = kinds
+            self._spike[i] = bool(spike[-1]) if n else False
+            rc = _REC_COLS[i]
+            if rc in cols:
+                cols[rc] = np.clip(np.asarray(cols[rc], dtype=float), self.inputs.force_lo,
+                                   self.inputs.force_hi)
+        cols["system_state"] = prep.state
+        cols["system_reason"] = prep.reason
+        return cols
 
     def describe(self) -> dict[str, Any]:
         """The settings of this run as plain data (goes to the output's metadata)."""

@@ -38,6 +38,7 @@ from grfguard.model.robot import SURALP, RobotConfig
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
     "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
+    "hold_unarmed_tests", "VibrationConfig", "AccVibrationDetector", "swing_load_to_stance",
 ]
 
 
@@ -57,6 +58,9 @@ class CommonModeConfig:
         outlier_n: A sensor whose residual misses the common pattern by more than this
             [N] and by ``outlier_ratio`` times the median miss is left out of the sample.
         outlier_ratio: See ``outlier_n``.
+        single_support_only: Learn only from single-support samples (one foot loaded),
+            where the per-sensor stance tests run: in double support a CoM error moves
+            load between the feet, a pattern the common CoP shift does not describe.
     """
 
     time_constant_s: float = 10.0
@@ -68,6 +72,7 @@ class CommonModeConfig:
     min_load_fraction: float = 0.2
     outlier_n: float = 20.0
     outlier_ratio: float = 4.0
+    single_support_only: bool = True
 
     def __post_init__(self) -> None:
         o = "common_mode"
@@ -123,6 +128,8 @@ class CommonModeMonitor:
         # CoP shift d moves a corner's share by L (d . p_i) / sum(p^2) (4 corners)
         self._sx = float(np.sum(p[:, 0] ** 2))
         self._sy = float(np.sum(p[:, 1] ** 2))
+        self._xl = [float(q) / self._sx for q in self._x]
+        self._yl = [float(q) / self._sy for q in self._y]
         self.reset()
 
     def reset(self) -> None:
@@ -132,7 +139,18 @@ class CommonModeMonitor:
         self._theta = np.zeros(3)
         self._sum_r = 0.0
         self._sum_v = 0.0
+        self._sr_f = [0.0, 0.0]  # per foot: summed residuals, virtual forces
+        self._sv_f = [0.0, 0.0]
+        self._mv_f = [[0.0, 0.0], [0.0, 0.0]]  # per foot: sum v L x / S_x, sum v L y / S_y
+        self._alpha_f = [0.0, 0.0]
         self._loaded_s = 0.0
+        self._armed_s = 0.0
+
+    @property
+    def armed(self) -> bool:
+        """``warmup_s`` of usable (single-support) samples have been seen, learned from
+        or not (the fit freezes while a sensor is flagged; arming goes on)."""
+        return self._armed_s >= self.config.warmup_s
 
     def update(
         self,
@@ -140,6 +158,7 @@ class CommonModeMonitor:
         vfs: Sequence[float],
         valid_foot: Sequence[bool] = (True, True),
         frozen: bool = False,
+        planned: Sequence[float] | None = None,
     ) -> CommonModeResult:
         """One sample.
 
@@ -149,61 +168,122 @@ class CommonModeMonitor:
             valid_foot: Per foot (right, left): the foot is in contact and its virtual
                 forces are valid.
             frozen: Do not learn from this sample (e.g. a sensor is flagged).
+            planned: Planned contact per foot (right, left); when given, only planned
+                single support is learned from (the virtual sensor may put the whole
+                load on one foot in planned double support while the other still
+                carries some: a wrong total).
 
         Returns:
             The :class:`CommonModeResult` (never raises on bad numbers).
         """
         c = self.config
-        m = np.asarray(measured, dtype=float)
-        v = np.asarray(vfs, dtype=float)
-        ok = np.isfinite(m) & np.isfinite(v)
-        loads = np.array([np.nansum(v[:4]), np.nansum(v[4:])])
-        use = np.zeros(8, dtype=bool)
-        for si in range(2):
-            if bool(valid_foot[si]) and loads[si] > c.min_load_fraction * self.robot.weight:
-                use[4 * si : 4 * si + 4] = ok[4 * si : 4 * si + 4]
-        L = np.repeat(loads, 4)
-        phi = np.column_stack(
-            [np.where(ok, v, 0.0), L * self._x / self._sx, L * self._y / self._sy]
-        )
-        if use.sum() >= 3:
+        m = [float(q) for q in measured]
+        v = [float(q) for q in vfs]
+        isf = math.isfinite
+        ok = [isf(a) and isf(b) for a, b in zip(m, v, strict=True)]
+        loads = [math.fsum(q for q in v[4 * f : 4 * f + 4] if isf(q)) for f in range(2)]
+        feet = [bool(valid_foot[f]) and loads[f] > c.min_load_fraction * self.robot.weight
+                for f in range(2)]
+        if c.single_support_only and all(feet):
+            feet = [False, False]
+        if planned is not None and c.single_support_only and not (
+                all(isf(q) for q in planned) and (planned[0] > 0.5) != (planned[1] > 0.5)):
+            feet = [False, False]
+        use = [feet[i // 4] and ok[i] for i in range(8)]
+        if any(use):
+            self._armed_s += self.dt_s
+        xs, ys = self._xl, self._yl
+        # regressors per sensor: (v_i, L x_i / S_x, L y_i / S_y)
+        phi = [((v[i] if ok[i] else 0.0), loads[i // 4] * xs[i], loads[i // 4] * ys[i])
+               for i in range(8)]
+        a0, b0, c0 = self._theta
+        res = [m[i] - v[i] for i in range(8)]
+        n_use = sum(use)
+        if n_use >= 3:
             # a residual that stands out from the others is a sensor's, not the model's
-            e = np.abs((m - v) - phi @ self._theta)
-            e_use = e[use]
-            worst = int(np.flatnonzero(use)[np.argmax(e_use)])
-            if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(e_use))):
+            af = self._alpha_f
+            e = {i: abs(res[i] - (af[i // 4] * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
+                 for i in range(8) if use[i]}
+            worst = max(e, key=e.__getitem__)
+            if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
                 use[worst] = False
-        if use.any() and not frozen:
+        if any(use) and not frozen:
             lam = math.exp(-self.dt_s / c.time_constant_s)
-            P, r = phi[use], (m - v)[use]
-            self._M = lam * self._M + P.T @ P
-            self._b = lam * self._b + P.T @ r
-            self._sum_r = lam * self._sum_r + float(r.sum())
-            self._sum_v = lam * self._sum_v + float(P[:, 0].sum())
+            M, b = self._M, self._b
+            M *= lam
+            b *= lam
+            sr = sv = 0.0
+            for f in range(2):
+                self._sr_f[f] *= lam
+                self._sv_f[f] *= lam
+                self._mv_f[f][0] *= lam
+                self._mv_f[f][1] *= lam
+            for i in range(8):
+                if use[i]:
+                    p0, p1, p2 = phi[i]
+                    r = res[i]
+                    M[0, 0] += p0 * p0
+                    M[0, 1] += p0 * p1
+                    M[0, 2] += p0 * p2
+                    M[1, 1] += p1 * p1
+                    M[1, 2] += p1 * p2
+                    M[2, 2] += p2 * p2
+                    b[0] += p0 * r
+                    b[1] += p1 * r
+                    b[2] += p2 * r
+                    sr += r
+                    sv += p0
+                    f = i // 4
+                    self._sr_f[f] += r
+                    self._sv_f[f] += p0
+                    self._mv_f[f][0] += p0 * p1
+                    self._mv_f[f][1] += p0 * p2
+            M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
+            self._sum_r = lam * self._sum_r + sr
+            self._sum_v = lam * self._sum_v + sv
             self._loaded_s += self.dt_s
-            # alpha from the totals (robust), then the common CoP shift given alpha
+            # alpha from the totals (robust), per foot (each foot's load cells have their
+            # own mean gain) once the foot has data; then the common CoP shift given them
             alpha = self._sum_r / self._sum_v if self._sum_v > 0 else 0.0
-            Mxy = self._M[1:, 1:] + 1e-6 * (np.trace(self._M[1:, 1:]) + 1e-9) * np.eye(2)
-            try:
-                beta = np.linalg.solve(Mxy, self._b[1:] - alpha * self._M[1:, 0])
-                self._theta = np.array([alpha, beta[0], beta[1]])
-            except np.linalg.LinAlgError:
-                pass
-        th = self._theta if self._loaded_s >= c.warmup_s else np.zeros(3)
+            sv_min = 0.1 * self._sum_v
+            self._alpha_f = [self._sr_f[f] / self._sv_f[f] if self._sv_f[f] > sv_min
+                             else alpha for f in range(2)]
+            af = self._alpha_f
+            reg = 1e-6 * (M[1, 1] + M[2, 2] + 1e-9)
+            m11, m12, m22 = M[1, 1] + reg, M[1, 2], M[2, 2] + reg
+            r1 = b[1] - af[0] * self._mv_f[0][0] - af[1] * self._mv_f[1][0]
+            r2 = b[2] - af[0] * self._mv_f[0][1] - af[1] * self._mv_f[1][1]
+            det = m11 * m22 - m12 * m12
+            if det > 0 and isf(det):
+                self._theta = np.array(
+                    [alpha, (m22 * r1 - m12 * r2) / det, (m11 * r2 - m12 * r1) / det])
+        warm = self._loaded_s >= c.warmup_s
+        th = self._theta if warm else np.zeros(3)
         ratio = float(np.clip(th[0], -c.max_ratio, c.max_ratio))
-        shift = np.clip(th[1:], -c.max_cop_shift_m, c.max_cop_shift_m)
-        corr = np.where(ok, ratio * v, 0.0) + phi[:, 1] * shift[0] + phi[:, 2] * shift[1]
-        corr = np.where(np.isfinite(corr), corr, 0.0)
+        ratio_f = [float(np.clip(q, -c.max_ratio, c.max_ratio)) if warm else 0.0
+                   for q in self._alpha_f]
+        sx = float(np.clip(th[1], -c.max_cop_shift_m, c.max_cop_shift_m))
+        sy = float(np.clip(th[2], -c.max_cop_shift_m, c.max_cop_shift_m))
+        shift = np.array([sx, sy])
         reasons = []
-        if self._loaded_s >= c.warmup_s:
-            if abs(ratio) > c.mass_ratio_limit:
-                reasons.append(f"total force off by {100 * ratio:+.1f} %")
-            if float(np.hypot(*shift)) > c.cop_shift_limit_m:
+        if warm:
+            if max(abs(q) for q in ratio_f) > c.mass_ratio_limit:
+                if abs(ratio_f[0] - ratio_f[1]) > c.mass_ratio_limit:
+                    reasons.append(f"total force off by {100 * ratio_f[0]:+.1f} % (right), "
+                                   f"{100 * ratio_f[1]:+.1f} % (left)")
+                else:
+                    reasons.append(f"total force off by {100 * ratio:+.1f} %")
+            if math.hypot(sx, sy) > c.cop_shift_limit_m:
                 reasons.append(
-                    f"attitude/CoM inconsistent (CoP shifted {100 * shift[0]:+.1f} cm x, "
-                    f"{100 * shift[1]:+.1f} cm y)"
+                    f"attitude/CoM inconsistent (CoP shifted {100 * sx:+.1f} cm x, "
+                    f"{100 * sy:+.1f} cm y)"
                 )
-        if not reasons:  # no evidence against the model: leave the virtual forces alone
+        if reasons:
+            corr = np.array([
+                (ratio_f[i // 4] * v[i] if ok[i] else 0.0) + phi[i][1] * sx + phi[i][2] * sy
+                for i in range(8)])
+            corr = np.where(np.isfinite(corr), corr, 0.0)
+        else:  # no evidence against the model: leave the virtual forces alone
             corr = np.zeros(8)
         return CommonModeResult(corr, bool(reasons), "; ".join(reasons), ratio, shift)
 
@@ -272,10 +352,23 @@ class SwingZeroLearner:
         self._sum = np.zeros(8)
         self._n = np.zeros(8)
         self._swing_s = np.zeros(2)
+        self._foot_n = np.zeros(2)
+        self._cache: np.ndarray | None = None
+
+    def armed(self, foot: int) -> bool:
+        """The foot has swung long enough for its zeros to be known (``apply_after_s`` of
+        settled swing), whether or not a zero was learned (a reading beyond
+        ``limit_n`` is a fault, left to the tests)."""
+        return bool(self._foot_n[foot] * self.dt_s >= self.config.apply_after_s)
 
     @property
     def zeros_n(self) -> np.ndarray:
         """(8,) zeros applied now [N] (0 where not learned or within the deadband)."""
+        if self._cache is None:
+            self._cache = self._zeros()
+        return self._cache
+
+    def _zeros(self) -> np.ndarray:
         c = self.config
         z = np.divide(self._sum, self._n, out=np.zeros(8), where=self._n > 0)
         ready = self._n * self.dt_s >= c.apply_after_s
@@ -306,6 +399,7 @@ class SwingZeroLearner:
             self._swing_s[f] = self._swing_s[f] + self.dt_s if swing else 0.0
             if self._swing_s[f] <= c.settle_s:
                 continue
+            self._foot_n[f] += 1
             for i in range(4 * f, 4 * f + 4):
                 if flagged[i] or not math.isfinite(m[i]) or self._n[i] >= max_n:
                     continue
@@ -313,7 +407,169 @@ class SwingZeroLearner:
                     continue
                 self._sum[i] += m[i]
                 self._n[i] += 1
+                self._cache = None
         return self.zeros_n
+
+
+def hold_unarmed_tests(detector, zeros_armed: Sequence[bool], stance_armed: bool) -> None:
+    """Arming delay of the per-sensor tests while the model errors are still unknown
+    (``common_mode``): call before each detector step. A foot's swing sums are held at
+    zero until its load-cell zeros are known (:meth:`SwingZeroLearner.armed`: the left
+    foot's first swing starts before its zeros could be learned), its corner and foot-total
+    sums until then and until the common-mode fit has seen ``warmup_s`` of single support
+    (:attr:`CommonModeMonitor.armed`). Held sums start from zero every sample, so a gross
+    fault (one sample beyond the CUSUM threshold plus the slack) still alarms at once."""
+    sensors, totals = detector.sensors, detector.totals
+    for f in range(2):
+        stance = bool(zeros_armed[f]) and bool(stance_armed)
+        for i in range(4 * f, 4 * f + 4):
+            s = sensors[i]
+            if not zeros_armed[f]:
+                s.swing_pos = s.swing_neg = 0.0
+            if not stance:
+                s.corner_pos = s.corner_neg = 0.0
+        if not stance:
+            totals.g_pos[f] = totals.g_neg[f] = 0.0
+
+
+def swing_load_to_stance(
+    x: Sequence[float], v: list[float], tot: list[float], cref: Sequence[float],
+    weight_n: float, air_fraction: float = 0.05,
+) -> bool:
+    """Planned single support, the swing foot's readings near zero (it is in the air),
+    yet the virtual sensor put load on it: its kinematic contact (corner heights within
+    a few mm of the ground) was fooled by encoder offsets or the attitude. The whole
+    vertical force is the stance foot's: move it there (stance corners scaled, swing
+    foot zero), in place. Returns True when something was moved.
+
+    Args:
+        x: (8,) readings [N] (zeros removed).
+        v: (8,) virtual corner forces [N] (modified).
+        tot: Virtual foot forces (right, left) [N] (modified).
+        cref: Planned contact per foot.
+        weight_n: Robot weight [N].
+        air_fraction: The swing foot is in the air when its readings sum below this
+            fraction of the weight.
+    """
+    if not all(math.isfinite(q) for q in cref):
+        return False
+    plan = [q > 0.5 for q in cref]
+    if plan[0] == plan[1]:
+        return False
+    st, sw = (0, 1) if plan[0] else (1, 0)
+    other, mine = tot[sw], tot[st]
+    if not (math.isfinite(other) and math.isfinite(mine)) or other <= 0.0 or mine <= 0.0:
+        return False
+    xs = [x[i] for i in range(4 * sw, 4 * sw + 4)]
+    if not all(math.isfinite(q) for q in xs) or abs(math.fsum(xs)) > air_fraction * weight_n:
+        return False
+    k = (mine + other) / mine
+    for i in range(4 * st, 4 * st + 4):
+        v[i] *= k
+    for i in range(4 * sw, 4 * sw + 4):
+        v[i] = 0.0
+    tot[st], tot[sw] = mine + other, 0.0
+    return True
+
+
+# ------------------------------------------------------------------ accelerometer vibration
+@dataclass(frozen=True)
+class VibrationConfig:
+    """Settings of :class:`AccVibrationDetector`.
+
+    Attributes:
+        cutoff_hz: Corner of the causal 2nd-order Butterworth high-pass on the horizontal
+            accelerometer axes [Hz] (walking accelerations are slower).
+        time_constant_s: Time constant of the running mean of the squared high-passed
+            acceleration [s].
+        limit_m_s2: Horizontal RMS above ``cutoff_hz`` beyond which the accelerometer is
+            called vibrating [m/s^2] (simulated walks with 0.05 m/s^2 white noise: at most
+            0.17; the iCub spectrum of issue 10: about 1.1).
+        start_s: Samples before this time [s] of data never switch (the mean starts at 0).
+        corner_sigma_scale: Factor on ``corner_sigma`` once switched: the corner residual
+            noise of the virtual sensor without accelerometer relative to the default one
+            (thresholds calibrated on two 60 s exact-model walks: 0.0289 / 0.0109 = 2.65;
+            ``total_sigma`` and the swing thresholds are unchanged, 0.0038 both).
+    """
+
+    cutoff_hz: float = 5.0
+    time_constant_s: float = 2.0
+    limit_m_s2: float = 0.3
+    start_s: float = 0.5
+    corner_sigma_scale: float = 2.7
+
+    def __post_init__(self) -> None:
+        o = "vibration"
+        check_number(o, "cutoff_hz", self.cutoff_hz, 0.1, 1e4, "Hz")
+        check_number(o, "time_constant_s", self.time_constant_s, 0.01, 600.0, "s")
+        check_number(o, "limit_m_s2", self.limit_m_s2, 0.0, 1e3, "m/s^2")
+        check_number(o, "start_s", self.start_s, 0.0, 600.0, "s")
+        check_number(o, "corner_sigma_scale", self.corner_sigma_scale, 1.0, 100.0, "")
+
+
+class AccVibrationDetector:
+    """Tells when the accelerometer shakes too much for the virtual sensor to use it (the
+    horizontal CoM acceleration above 1 Hz comes from it; at the iCub's 1.5 m/s^2 the
+    corner forces are off by about 200 N RMS). Latches: once on, stays on until
+    :meth:`reset`. The same per-sample arithmetic serves :meth:`update` and :meth:`run`.
+
+    Args:
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(self, dt_s: float = 0.001, config: VibrationConfig | None = None) -> None:
+        from scipy.signal import butter
+
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else VibrationConfig()
+        c = self.config
+        wn = min(0.95, 2.0 * c.cutoff_hz * self.dt_s)
+        b, a = butter(2, wn, "highpass")
+        self._b = [float(q) for q in b]
+        self._a = [float(q) for q in a]
+        self._lam = math.exp(-self.dt_s / c.time_constant_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (switch off)."""
+        self._z = [[0.0, 0.0], [0.0, 0.0]]  # DF2T states per axis
+        self._ms = 0.0
+        self._t = 0.0
+        self.on = False
+        self.rms_m_s2 = 0.0
+
+    def update(self, acc_x: float, acc_y: float) -> bool:
+        """One sample of the horizontal accelerometer axes [m/s^2]; returns :attr:`on`
+        (never raises; non-finite samples are skipped)."""
+        if self.on:
+            return True
+        if not (math.isfinite(acc_x) and math.isfinite(acc_y)):
+            return False
+        b0, b1, b2 = self._b
+        _, a1, a2 = self._a
+        e = 0.0
+        for j, u in enumerate((acc_x, acc_y)):
+            z = self._z[j]
+            y = b0 * u + z[0]
+            z[0] = b1 * u - a1 * y + z[1]
+            z[1] = b2 * u - a2 * y
+            e += y * y
+        self._ms = self._lam * self._ms + (1.0 - self._lam) * e
+        self._t += self.dt_s
+        self.rms_m_s2 = math.sqrt(self._ms)
+        if self._t >= self.config.start_s and self.rms_m_s2 > self.config.limit_m_s2:
+            self.on = True
+        return self.on
+
+    def run(self, acc_x: Sequence[float], acc_y: Sequence[float]) -> int:
+        """Reset, then feed whole columns; returns the first index switched on
+        (``len`` when never). Leaves the detector in its final state."""
+        self.reset()
+        for k, (ax, ay) in enumerate(zip(acc_x, acc_y, strict=True)):
+            if self.update(float(ax), float(ay)):
+                return k
+        return len(acc_x)
 
 
 # ------------------------------------------------------------------ gyro bias

@@ -28,6 +28,8 @@ __all__ = [
 DEFAULT_THRESHOLDS_FILE = "default_thresholds.toml"
 #: Thresholds for the paper's method on the paper's own virtual sensor (eq. 1-23).
 PAPER_VFS_THRESHOLDS_FILE = "paper_vfs_thresholds.toml"
+#: Sampling period at which a legacy ``const_samples`` count was meant [s].
+_LEGACY_DT_S = 1e-3
 
 
 @dataclass(frozen=True)
@@ -51,7 +53,14 @@ class Thresholds:
             the weight].
         corner_kappa: Corner CUSUM drift allowance [σ].
         corner_h: Corner CUSUM threshold [σ·samples].
-        const_samples: Identical consecutive readings of a loaded sensor that mean frozen.
+        const_s: A loaded sensor whose reading stays exactly the same this long is frozen,
+            stuck or clipped [s] (25 samples at 1 kHz, 5 at 200 Hz; at least
+            :attr:`~grfguard.detect.tuning.DetectTuning.const_min_samples` identical
+            readings, 3 at 100 Hz; longer for a sensor whose quantised readings repeat
+            by chance, see :func:`~grfguard.detect.residual_tests.constant_test`).
+            Files written before it was in seconds carry
+            ``const_samples`` (counted at 1 kHz, the rate of every shipped calibration);
+            it is read as ``const_samples`` x 1 ms.
         paper_eta_n: Eq. 33 thresholds on the low-passed η̂ of the paper's method, one per
             sensor r1..r4, l1..l4 [N].
         false_alarm_rate_per_hour: The target rate they were calibrated for [1/h].
@@ -68,7 +77,7 @@ class Thresholds:
     corner_sigma: float = 0.011
     corner_kappa: float = 3.0
     corner_h: float = 30.0
-    const_samples: int = 25
+    const_s: float = 0.025
     paper_eta_n: tuple[float, ...] = (24.4, 39.3, 35.6, 32.0, 29.8, 15.8, 22.8, 19.4)
     false_alarm_rate_per_hour: float = 0.1
     source: str = "builtin"
@@ -98,11 +107,6 @@ class Thresholds:
             lo = 0.0 if f.name.endswith("kappa") else 1e-12
             if not (v >= lo):
                 raise ConfigError(f"thresholds.{f.name} = {v!r} must be >= {lo}")
-        if int(self.const_samples) != self.const_samples or self.const_samples < 2:
-            raise ConfigError(
-                f"thresholds.const_samples = {self.const_samples!r} must be an integer >= 2"
-            )
-        object.__setattr__(self, "const_samples", int(self.const_samples))
 
     def replace(self, **changes: Any) -> Thresholds:
         """Copy with some fields changed (validated)."""
@@ -132,6 +136,15 @@ class Thresholds:
     def from_dict(cls, data: dict[str, Any]) -> Thresholds:
         """From a dict (unknown keys are an error)."""
         names = {f.name for f in fields(cls)}
+        data = dict(data)
+        if "const_samples" in data:  # legacy: a count at 1 kHz (see ``const_s``)
+            n = data.pop("const_samples")
+            if "const_s" in data:
+                raise ConfigError("thresholds: give const_s [s] only, not also const_samples")
+            if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+                raise ConfigError(f"thresholds.const_samples = {n!r} must be an integer >= 2 "
+                                  "(samples at 1 kHz; prefer const_s [s])")
+            data["const_s"] = n * _LEGACY_DT_S
         extra = set(data) - names
         if extra:
             raise ConfigError(f"unknown threshold keys {sorted(extra)}; allowed {sorted(names)}")

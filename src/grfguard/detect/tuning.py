@@ -80,6 +80,9 @@ class DetectTuning:
             ``clear_s`` is needed before the flag clears [-].
         clear_valid_fraction: Any other flag clears after this fraction of ``clear_s`` of
             valid quiet test time [-].
+        const_min_samples: Fewest identical readings that can mean frozen, whatever the
+            rate (``Thresholds.const_s`` is 2.5 samples at 100 Hz; two equal readings in
+            a row are too likely for a quantised healthy sensor) [-].
     """
 
     contact_level: float = 0.5
@@ -107,6 +110,7 @@ class DetectTuning:
     clear_const_valid_fraction: float = 0.5
     clear_spikes_valid_factor: float = 3.0
     clear_valid_fraction: float = 0.5
+    const_min_samples: int = 3
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -117,11 +121,19 @@ class DetectTuning:
             raise ConfigError(
                 f"detect tuning stance_eta_factor = {self.stance_eta_factor!r} must be in (0, 1]"
             )
+        if int(self.const_min_samples) != self.const_min_samples or self.const_min_samples < 2:
+            raise ConfigError(f"detect tuning const_min_samples = {self.const_min_samples!r} "
+                              "must be an integer >= 2")
 
     @staticmethod
     def samples(duration_s: float, dt_s: float) -> int:
         """Number of samples of ``duration_s`` at the sampling period ``dt_s`` [s]."""
         return int(round(duration_s / dt_s))
+
+    def const_samples(self, const_s: float, dt_s: float) -> int:
+        """Identical readings of a loaded sensor that mean frozen: ``const_s`` [s] at the
+        sampling period ``dt_s`` [s], at least ``const_min_samples``."""
+        return max(int(self.const_min_samples), self.samples(const_s, dt_s))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (for metadata)."""

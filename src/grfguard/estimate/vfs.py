@@ -16,16 +16,21 @@ Pipeline (DESIGN.md, "Pipeline"):
 5. split (:mod:`grfguard.estimate.legs`, :mod:`grfguard.estimate.compliance`): contact per
    corner from the kinematic heights, one QP over all corners in contact with the total
    force, the ZMP and a sole-compliance prior (``qp``, default; the rigid QP of
-   :mod:`grfguard.estimate.corner_qp` without the prior), or the paper's alpha rule and
-   eq. 10-12 (``paper``, per-foot QPs of :mod:`grfguard.estimate.corner_qp`).
+   :func:`grfguard.estimate.compliance.qp_split` without the prior), or the paper's alpha
+   rule and eq. 10-12 (``paper``, per-foot QPs by the same solver).
 
-Each step is a stage method over ``(T, ...)`` arrays (``_attitude``, ``forward_batch``,
-``_odometry``, ``_momentum`` or ``_paper_momentum``, ``_split``, wired by ``_process``);
-stateful stages carry their state (filters, the last samples of the finite differences)
-between calls. :class:`VirtualForceSensor` batches (``run``: T = the whole log) and streams
-(``update``: the same stages with T = 1), so both give the same numbers (to rounding). A
-sample with a non-finite input is skipped (the state does not move), the last output is
-held and ``vfs_valid`` is 0.
+One implementation, two engines. The default settings (and every setting
+:meth:`grfguard.kernels.vfs.VFSKernel.supports`) run the compiled step of
+:mod:`grfguard.kernels.vfs`: one numba function per sample, called once per ``update`` and
+looped over the log in one compiled call by ``run``, so streaming and batch are identical
+by construction. The settings the kernel does not cover (the paper's CoM filter and split,
+the pendulum Kalman ZMP, the anchor attitude) and ``compiled=False`` run the Python stages
+below: stage methods over ``(T, ...)`` arrays (``_attitude``, ``forward_batch``,
+``_odometry``, ``_momentum`` or ``_paper_momentum``, ``_split``, wired by ``_process``),
+batched by ``run`` (T = the whole log) and streamed by ``update`` (T = 1); stateful stages
+carry their state between calls. Both engines agree to about 1e-9 N on the default
+(``tests/test_kernels_vfs.py``). A sample with a non-finite input is skipped (the state
+does not move), the last output is held and ``vfs_valid`` is 0.
 
 Outputs: ``vfs_<s>`` for r1..r4, l1..l4 [N], ``com_est_x/y/z`` [m], ``vfs_total_r/l`` [N],
 ``vfs_cop_r_x/y``, ``vfs_cop_l_x/y`` [m, world; NaN when the foot carries < 1 N],
@@ -102,6 +107,13 @@ VFS_OUTPUT_COLUMNS: tuple[str, ...] = (
     "vfs_valid",
 )
 _MIN_FOOT_FORCE_N = 1.0
+
+
+def _in_columns() -> tuple[str, ...]:
+    """Input row layout of the compiled kernel (:data:`grfguard.kernels.vfs.IN_COLUMNS`)."""
+    from grfguard.kernels.vfs import IN_COLUMNS
+
+    return IN_COLUMNS
 
 
 def _robot_from_attrs(attrs: Mapping[str, Any]) -> RobotConfig:
@@ -182,17 +194,21 @@ class _Inputs:
 
 
 class VirtualForceSensor:
-    """Virtual foot force sensor, streaming (``update``) and batch (``run``).
+    """Virtual foot force sensor, streaming (``update``, ``update_array``) and batch (``run``).
 
     Args:
         robot: Robot description.
         config: Settings (default :class:`VFSConfig`).
         kinematics: Optional prebuilt :class:`KinematicModel` (shares the MuJoCo model).
+        compiled: Run the compiled kernel (:mod:`grfguard.kernels.vfs`) when it covers
+            ``config`` (the default); False runs the Python stages (slow; the reference
+            the kernel is tested against). :attr:`compiled` says which engine runs.
 
     Example:
         >>> vfs = VirtualForceSensor.for_log(log)
         >>> out = vfs.run(log)          # DataFrame with vfs_r1 ... vfs_l4
         >>> vfs.reset(); row_out = vfs.update(log.iloc[0].to_dict())
+        >>> y = vfs.update_array(x)     # x in kernels.vfs.IN_COLUMNS order (compiled only)
     """
 
     def __init__(
@@ -200,7 +216,10 @@ class VirtualForceSensor:
         robot: RobotConfig | None = None,
         config: VFSConfig | None = None,
         kinematics: KinematicModel | None = None,
+        compiled: bool = True,
     ) -> None:
+        from grfguard.kernels.vfs import VFSKernel
+
         self.robot = robot if robot is not None else RobotConfig()
         self.config = config if config is not None else VFSConfig()
         self.kin = kinematics if kinematics is not None else KinematicModel(self.robot)
@@ -209,12 +228,17 @@ class VirtualForceSensor:
         self.points_F = self.robot.sensor_positions_in_foot()
         #: Corner contact stiffness of the compliance prior [N/m] (0: rigid QP).
         self.contact_stiffness = self.config.contact_stiffness_per_kg * self.mass
+        #: True when the compiled kernel runs (``compiled`` and the settings covered).
+        self.compiled = bool(compiled) and VFSKernel.supports(self.config)
+        self._kern: dict[tuple[bool, bool], Any] = {}
+        self._x = np.empty(len(_in_columns()))
+        self._y = np.empty(len(VFS_OUTPUT_COLUMNS))
         self.reset()
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def for_log(
-        cls, log: pd.DataFrame, config: VFSConfig | None = None
+        cls, log: pd.DataFrame, config: VFSConfig | None = None, compiled: bool = True
     ) -> VirtualForceSensor:
         """A sensor for ``log``: robot from ``log.attrs["robot"]`` (SURALP if absent), the
         sampling period from the ``time`` column."""
@@ -224,10 +248,26 @@ class VirtualForceSensor:
             dt = float(np.median(np.diff(log[TIME].to_numpy(float))))
             if np.isfinite(dt) and dt > 0 and abs(dt - cfg.dt) > 1e-9 * cfg.dt:
                 cfg = cfg.replace(dt=dt)
-        return cls(robot, cfg)
+        return cls(robot, cfg, compiled=compiled)
+
+    def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
+        """The compiled kernel (:class:`grfguard.kernels.vfs.VFSKernel`) for inputs with /
+        without the gyro and the planned contact (built once, kept).
+
+        Raises:
+            ConfigError: The kernel does not cover the settings.
+        """
+        from grfguard.kernels.vfs import VFSKernel
+
+        key = (has_gyro, has_ref)
+        if key not in self._kern:
+            self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
+        return self._kern[key]
 
     def reset(self) -> None:
         """Forget all state (odometry anchor, filters, previous samples)."""
+        for k in self._kern.values():
+            k.reset()
         c = self.config
         self._odo = LegOdometry(c.contact_height, c.dt, c.anchor_attitude_time_constant)
         self._att = AttitudeFilter(c.dt, c.attitude_time_constant)
@@ -307,6 +347,15 @@ class VirtualForceSensor:
             non-finite input is skipped: the last output is returned with
             ``vfs_valid = 0`` (NaN before the first valid sample).
         """
+        if self.compiled:
+            x = self._x
+            for i, c in enumerate(_in_columns()):
+                try:
+                    x[i] = float(row[c])
+                except (KeyError, TypeError, ValueError):
+                    x[i] = np.nan
+            y = self.kernel().step(x, self._y)
+            return dict(zip(VFS_OUTPUT_COLUMNS, y.tolist(), strict=True))
         try:
             inp = self._inputs(row)
         except (KeyError, TypeError, ValueError):
@@ -318,6 +367,18 @@ class VirtualForceSensor:
         res["vfs_valid"] = 1.0
         self._last = res
         return dict(res)
+
+    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample as arrays (compiled engine): ``x`` (24,) in
+        :data:`grfguard.kernels.vfs.IN_COLUMNS` order -> (22,) in :data:`VFS_OUTPUT_COLUMNS`
+        order (written into ``y`` when given). Never raises on a bad sample (non-finite
+        input: last output held, ``vfs_valid = 0``).
+
+        Raises:
+            ConfigError: The kernel does not cover the settings.
+            LogFormatError: ``x`` or ``y`` has the wrong shape.
+        """
+        return self.kernel().step(x, np.empty(len(VFS_OUTPUT_COLUMNS)) if y is None else y)
 
     def _hold(self) -> dict[str, float]:
         if self._last is None:
@@ -339,6 +400,8 @@ class VirtualForceSensor:
         """
         self.reset()
         self.check_columns(log.columns)
+        if self.compiled:
+            return self._run_compiled(log, None)
         n = len(log)
         inp = self._inputs(log)
         valid = inp.valid()
@@ -359,6 +422,18 @@ class VirtualForceSensor:
         self._last["vfs_valid"] = 1.0
         return pd.DataFrame(result, index=log.index)
 
+    def _run_compiled(self, log: pd.DataFrame, resync: np.ndarray | None) -> pd.DataFrame:
+        """The compiled batch: the kernel's step looped over the log in one call."""
+        from grfguard.kernels.vfs import log_to_array
+
+        X, has_gyro, has_ref = log_to_array(log)
+        k = self.kernel(has_gyro, has_ref)
+        if resync is None:
+            Y = k.run(X)
+        else:
+            Y = k.run_segments(X, np.flatnonzero(np.asarray(resync, bool)))
+        return pd.DataFrame(Y, index=log.index, columns=list(VFS_OUTPUT_COLUMNS))
+
     def input_valid(self, log: pd.DataFrame) -> np.ndarray:
         """(T,) bool: rows whose inputs the sensor can use (finite quaternion, joints...)."""
         return self._inputs(log).valid()
@@ -366,6 +441,8 @@ class VirtualForceSensor:
     def resync(self) -> None:
         """Forget the finite-difference history only (a continuity break): the next two
         samples have no rate; filters, attitude and odometry keep their state."""
+        for k in self._kern.values():
+            k.resync()
         self._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
         self._prev_frames = None
         self._prev_L = None
@@ -376,6 +453,10 @@ class VirtualForceSensor:
         """
         self.reset()
         self.check_columns(log.columns)
+        if self.compiled:
+            out = self._run_compiled(log, resync)
+            self.reset()
+            return out
         n = len(log)
         inp = self._inputs(log)
         valid = inp.valid()

@@ -1,9 +1,10 @@
 """Compiled core (numba): forward kinematics of any MuJoCo tree and the virtual force sensor
 as one step function over plain arrays, streamed sample by sample or looped over a log.
 
-* :class:`CompiledVirtualForceSensor`: drop-in for
-  :class:`grfguard.estimate.vfs.VirtualForceSensor` (``update``/``run``, plus the array
-  call ``update_array``); ``Monitor(config, CompiledVirtualForceSensor.for_log(log))``.
+* :class:`VFSKernel`: the constants, state and scratch of the compiled virtual force
+  sensor; :class:`grfguard.estimate.vfs.VirtualForceSensor` runs it (``update``, ``run``,
+  ``update_array``) whenever it covers the settings. ``CompiledVirtualForceSensor`` is
+  an old name of that class.
 * :func:`vfs_batch`: compiled ``VirtualForceSensor.for_log(log).run(log)``.
 * :func:`compiled_monitor`: ``Monitor.for_log`` with the compiled sensor inside.
 * :func:`warm_up`: compile or load the cache before the first sample.

@@ -121,122 +121,113 @@ class TreeModel:
 
 
 # ----------------------------------------------------------------------------- MuJoCo maths
+# Scalar helpers (no array views: nothing to reference-count, everything stays in
+# registers); the operation order is MuJoCo's, so results are bit-equal where MuJoCo's
+# build does not fuse differently.
 @njit(inline="always")
-def _normalize4(v):
-    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3])
+def _nq(q0, q1, q2, q3):
+    """mju_normalize4: unit quaternion (identity below 1e-15; unchanged within 1e-15)."""
+    n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     if n < _MINVAL:
-        v[0] = 1.0
-        v[1] = 0.0
-        v[2] = 0.0
-        v[3] = 0.0
-    elif abs(n - 1.0) > _MINVAL:
+        return 1.0, 0.0, 0.0, 0.0
+    if abs(n - 1.0) > _MINVAL:
         inv = 1.0 / n
-        v[0] *= inv
-        v[1] *= inv
-        v[2] *= inv
-        v[3] *= inv
-    return n
+        return q0 * inv, q1 * inv, q2 * inv, q3 * inv
+    return q0, q1, q2, q3
 
 
 @njit(inline="always")
-def _mulquat(res, qa, qb):
-    t0 = qa[0] * qb[0] - qa[1] * qb[1] - qa[2] * qb[2] - qa[3] * qb[3]
-    t1 = qa[0] * qb[1] + qa[1] * qb[0] + qa[2] * qb[3] - qa[3] * qb[2]
-    t2 = qa[0] * qb[2] - qa[1] * qb[3] + qa[2] * qb[0] + qa[3] * qb[1]
-    t3 = qa[0] * qb[3] + qa[1] * qb[2] - qa[2] * qb[1] + qa[3] * qb[0]
-    res[0] = t0
-    res[1] = t1
-    res[2] = t2
-    res[3] = t3
+def _mq(a0, a1, a2, a3, b0, b1, b2, b3):
+    """mju_mulQuat."""
+    return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
 @njit(inline="always")
-def _rotvecquat(res, vec, quat):
-    if vec[0] == 0 and vec[1] == 0 and vec[2] == 0:
-        res[0] = 0.0
-        res[1] = 0.0
-        res[2] = 0.0
-    elif quat[0] == 1 and quat[1] == 0 and quat[2] == 0 and quat[3] == 0:
-        res[0] = vec[0]
-        res[1] = vec[1]
-        res[2] = vec[2]
-    else:
-        t0 = quat[0] * vec[0] + quat[2] * vec[2] - quat[3] * vec[1]
-        t1 = quat[0] * vec[1] + quat[3] * vec[0] - quat[1] * vec[2]
-        t2 = quat[0] * vec[2] + quat[1] * vec[1] - quat[2] * vec[0]
-        r0 = vec[0] + 2 * (quat[2] * t2 - quat[3] * t1)
-        r1 = vec[1] + 2 * (quat[3] * t0 - quat[1] * t2)
-        r2 = vec[2] + 2 * (quat[1] * t1 - quat[2] * t0)
-        res[0] = r0
-        res[1] = r1
-        res[2] = r2
+def _rv(v0, v1, v2, q0, q1, q2, q3):
+    """mju_rotVecQuat."""
+    if v0 == 0 and v1 == 0 and v2 == 0:
+        return 0.0, 0.0, 0.0
+    if q0 == 1 and q1 == 0 and q2 == 0 and q3 == 0:
+        return v0, v1, v2
+    t0 = q0 * v0 + q2 * v2 - q3 * v1
+    t1 = q0 * v1 + q3 * v0 - q1 * v2
+    t2 = q0 * v2 + q1 * v1 - q2 * v0
+    return (v0 + 2 * (q2 * t2 - q3 * t1), v1 + 2 * (q3 * t0 - q1 * t2),
+            v2 + 2 * (q1 * t1 - q2 * t0))
 
 
 @njit(inline="always")
-def _quat2mat(res, q):
-    if q[0] == 1 and q[1] == 0 and q[2] == 0 and q[3] == 0:
-        for k in range(9):
-            res[k] = 0.0
-        res[0] = 1.0
-        res[4] = 1.0
-        res[8] = 1.0
+def _q2m(m, i, q0, q1, q2, q3):
+    """mju_quat2Mat into row ``i`` of ``m`` (n, 9)."""
+    if q0 == 1 and q1 == 0 and q2 == 0 and q3 == 0:
+        m[i, 0] = 1.0
+        m[i, 1] = 0.0
+        m[i, 2] = 0.0
+        m[i, 3] = 0.0
+        m[i, 4] = 1.0
+        m[i, 5] = 0.0
+        m[i, 6] = 0.0
+        m[i, 7] = 0.0
+        m[i, 8] = 1.0
         return
-    q00 = q[0] * q[0]
-    q01 = q[0] * q[1]
-    q02 = q[0] * q[2]
-    q03 = q[0] * q[3]
-    q11 = q[1] * q[1]
-    q12 = q[1] * q[2]
-    q13 = q[1] * q[3]
-    q22 = q[2] * q[2]
-    q23 = q[2] * q[3]
-    q33 = q[3] * q[3]
+    q00 = q0 * q0
+    q01 = q0 * q1
+    q02 = q0 * q2
+    q03 = q0 * q3
+    q11 = q1 * q1
+    q12 = q1 * q2
+    q13 = q1 * q3
+    q22 = q2 * q2
+    q23 = q2 * q3
+    q33 = q3 * q3
     # the association order MuJoCo's build uses (measured bit-equal on mujoco 4.0.0)
-    res[0] = (q00 - q22) + (q11 - q33)
-    res[4] = (q00 + q22) - (q11 + q33)
-    res[8] = (q00 - q22) - (q11 - q33)
-    res[1] = 2 * (q12 - q03)
-    res[2] = 2 * (q13 + q02)
-    res[3] = 2 * (q12 + q03)
-    res[5] = 2 * (q23 - q01)
-    res[6] = 2 * (q13 - q02)
-    res[7] = 2 * (q23 + q01)
+    m[i, 0] = (q00 - q22) + (q11 - q33)
+    m[i, 4] = (q00 + q22) - (q11 + q33)
+    m[i, 8] = (q00 - q22) - (q11 - q33)
+    m[i, 1] = 2 * (q12 - q03)
+    m[i, 2] = 2 * (q13 + q02)
+    m[i, 3] = 2 * (q12 + q03)
+    m[i, 5] = 2 * (q23 - q01)
+    m[i, 6] = 2 * (q13 - q02)
+    m[i, 7] = 2 * (q23 + q01)
 
 
 @njit(inline="always")
-def _matvec3(res, mat, vec):
-    r0 = mat[0] * vec[0] + mat[1] * vec[1] + mat[2] * vec[2]
-    r1 = mat[3] * vec[0] + mat[4] * vec[1] + mat[5] * vec[2]
-    r2 = mat[6] * vec[0] + mat[7] * vec[1] + mat[8] * vec[2]
-    res[0] = r0
-    res[1] = r1
-    res[2] = r2
+def _mv(m, i, v0, v1, v2):
+    """mju_mulMatVec3 with row ``i`` of ``m`` (n, 9)."""
+    return (m[i, 0] * v0 + m[i, 1] * v1 + m[i, 2] * v2,
+            m[i, 3] * v0 + m[i, 4] * v1 + m[i, 5] * v2,
+            m[i, 6] * v0 + m[i, 7] * v1 + m[i, 8] * v2)
 
 
 @njit(inline="always")
-def _local2global(xpos_out, xmat_out, pos, quat, body, sameframe, xpos, xquat, xmat, xipos,
-                  ximat, tmp4, tmp3):
-    # sameframe: 0 none, 1 body, 2 inertia, 3 body rotation, 4 inertia rotation
+def _l2g(opos, omat, o, pos, quat, s, body, sameframe, xpos, xquat, xmat, xipos, ximat):
+    """mj_local2Global: frame ``s`` of ``pos``/``quat`` on ``body`` into row ``o`` of
+    ``opos``/``omat`` (sameframe: 0 none, 1 body, 2 inertia, 3 body rot., 4 inertia rot.)."""
     if sameframe == 0 or sameframe == 3 or sameframe == 4:
-        _matvec3(tmp3, xmat[body], pos)
-        xpos_out[0] = tmp3[0] + xpos[body, 0]
-        xpos_out[1] = tmp3[1] + xpos[body, 1]
-        xpos_out[2] = tmp3[2] + xpos[body, 2]
+        v0, v1, v2 = _mv(xmat, body, pos[s, 0], pos[s, 1], pos[s, 2])
+        opos[o, 0] = v0 + xpos[body, 0]
+        opos[o, 1] = v1 + xpos[body, 1]
+        opos[o, 2] = v2 + xpos[body, 2]
     elif sameframe == 1:
         for k in range(3):
-            xpos_out[k] = xpos[body, k]
+            opos[o, k] = xpos[body, k]
     else:
         for k in range(3):
-            xpos_out[k] = xipos[body, k]
+            opos[o, k] = xipos[body, k]
     if sameframe == 0:
-        _mulquat(tmp4, xquat[body], quat)
-        _quat2mat(xmat_out, tmp4)
+        q0, q1, q2, q3 = _mq(xquat[body, 0], xquat[body, 1], xquat[body, 2], xquat[body, 3],
+                             quat[s, 0], quat[s, 1], quat[s, 2], quat[s, 3])
+        _q2m(omat, o, q0, q1, q2, q3)
     elif sameframe == 1 or sameframe == 3:
         for k in range(9):
-            xmat_out[k] = xmat[body, k]
+            omat[o, k] = xmat[body, k]
     else:
         for k in range(9):
-            xmat_out[k] = ximat[body, k]
+            omat[o, k] = ximat[body, k]
 
 
 @njit
@@ -248,62 +239,76 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
 
     ``qpos`` is a work copy of ``qpos_in`` (its free/ball quaternions get normalised);
     outputs ``xpos (nb, 3)``, ``xquat (nb, 4)``, ``xmat (nb, 9)``, ``xipos (nb, 3)``,
-    ``ximat (nb, 9)``, ``subtree_com (nb, 3)`` [m], work ``mass_subtree (nb,)``.
+    ``ximat (nb, 9)``, ``subtree_com (nb, 3)`` [m], work ``mass_subtree (nb,)``; ``work``
+    is unused (kept for the signature). No allocation.
     """
     nb = body_parent.shape[0]
     _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
     _world_frame(xpos, xquat, xmat, xipos, ximat)
-    pos = work[0:3]
-    quat = work[3:7]
-    vec = work[7:10]
-    vec1 = work[10:13]
-    xanchor = work[13:16]
-    qloc = work[16:20]
-    tmp4 = work[20:24]
-    tmp3 = work[24:27]
     for i in range(1, nb):
         ja = body_jntadr[i]
         if body_jntnum[i] == 1 and jnt_type[ja] == FREE:
             a = jnt_qposadr[ja]
-            for k in range(3):
-                pos[k] = qpos[a + k]
-            for k in range(4):
-                quat[k] = qpos[a + 3 + k]
+            p0, p1, p2 = qpos[a], qpos[a + 1], qpos[a + 2]
+            q0, q1, q2, q3 = qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6]
         else:
             p = body_parent[i]
-            _matvec3(vec, xmat[p], body_pos[i])
-            for k in range(3):
-                pos[k] = xpos[p, k] + vec[k]
-            _mulquat(quat, xquat[p], body_quat[i])
+            v0, v1, v2 = _mv(xmat, p, body_pos[i, 0], body_pos[i, 1], body_pos[i, 2])
+            p0 = xpos[p, 0] + v0
+            p1 = xpos[p, 1] + v1
+            p2 = xpos[p, 2] + v2
+            q0, q1, q2, q3 = _mq(xquat[p, 0], xquat[p, 1], xquat[p, 2], xquat[p, 3],
+                                 body_quat[i, 0], body_quat[i, 1], body_quat[i, 2],
+                                 body_quat[i, 3])
             for jj in range(body_jntnum[i]):
                 j = ja + jj
                 a = jnt_qposadr[j]
                 t = jnt_type[j]
-                _rotvecquat(xanchor, jnt_pos[j], quat)
-                for k in range(3):
-                    xanchor[k] = xanchor[k] + pos[k]
+                j0, j1, j2 = jnt_pos[j, 0], jnt_pos[j, 1], jnt_pos[j, 2]
+                a0, a1, a2 = _rv(j0, j1, j2, q0, q1, q2, q3)
+                a0 = a0 + p0
+                a1 = a1 + p1
+                a2 = a2 + p2
                 if t == SLIDE:
-                    _rotvecquat(vec, jnt_axis[j], quat)
-                    s = qpos[a] - qpos0[a]
-                    for k in range(3):
-                        pos[k] = pos[k] + vec[k] * s
+                    v0, v1, v2 = _rv(jnt_axis[j, 0], jnt_axis[j, 1], jnt_axis[j, 2], q0, q1,
+                                     q2, q3)
+                    sl = qpos[a] - qpos0[a]
+                    p0 = p0 + v0 * sl
+                    p1 = p1 + v1 * sl
+                    p2 = p2 + v2 * sl
                 else:
-                    _joint_rotation(qloc, t, qpos, a, qpos0[a], jnt_axis[j])
-                    _mulquat(quat, quat, qloc)
-                    for k in range(3):
-                        vec[k] = xanchor[k] - pos[k]
-                    _rotvecquat(vec1, jnt_pos[j], quat)
-                    for k in range(3):
-                        pos[k] += vec[k] - vec1[k]
-        _normalize4(quat)
-        for k in range(4):
-            xquat[i, k] = quat[k]
-        for k in range(3):
-            xpos[i, k] = pos[k]
-        _quat2mat(xmat[i], quat)
+                    if t == BALL:
+                        l0, l1, l2, l3 = qpos[a], qpos[a + 1], qpos[a + 2], qpos[a + 3]
+                    else:
+                        ang = qpos[a] - qpos0[a]
+                        if ang == 0:
+                            l0, l1, l2, l3 = 1.0, 0.0, 0.0, 0.0
+                        else:
+                            sn = math.sin(ang * 0.5)
+                            l0 = math.cos(ang * 0.5)
+                            l1 = jnt_axis[j, 0] * sn
+                            l2 = jnt_axis[j, 1] * sn
+                            l3 = jnt_axis[j, 2] * sn
+                    q0, q1, q2, q3 = _mq(q0, q1, q2, q3, l0, l1, l2, l3)
+                    v0 = a0 - p0
+                    v1 = a1 - p1
+                    v2 = a2 - p2
+                    w0, w1, w2 = _rv(j0, j1, j2, q0, q1, q2, q3)
+                    p0 += v0 - w0
+                    p1 += v1 - w1
+                    p2 += v2 - w2
+        q0, q1, q2, q3 = _nq(q0, q1, q2, q3)
+        xquat[i, 0] = q0
+        xquat[i, 1] = q1
+        xquat[i, 2] = q2
+        xquat[i, 3] = q3
+        xpos[i, 0] = p0
+        xpos[i, 1] = p1
+        xpos[i, 2] = p2
+        _q2m(xmat, i, q0, q1, q2, q3)
     for i in range(1, nb):
-        _local2global(xipos[i], ximat[i], body_ipos[i], body_iquat[i], i, body_sameframe[i],
-                      xpos, xquat, xmat, xipos, ximat, tmp4, tmp3)
+        _l2g(xipos, ximat, i, body_ipos, body_iquat, i, i, body_sameframe[i], xpos, xquat,
+             xmat, xipos, ximat)
     _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
 
 
@@ -314,10 +319,13 @@ def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
         qpos[k] = qpos_in[k]
     for j in range(jnt_type.shape[0]):
         t = jnt_type[j]
-        if t == FREE:
-            _normalize4(qpos[jnt_qposadr[j] + 3 : jnt_qposadr[j] + 7])
-        elif t == BALL:
-            _normalize4(qpos[jnt_qposadr[j] : jnt_qposadr[j] + 4])
+        if t == FREE or t == BALL:
+            a = jnt_qposadr[j] + (3 if t == FREE else 0)
+            q0, q1, q2, q3 = _nq(qpos[a], qpos[a + 1], qpos[a + 2], qpos[a + 3])
+            qpos[a] = q0
+            qpos[a + 1] = q1
+            qpos[a + 2] = q2
+            qpos[a + 3] = q3
 
 
 @njit
@@ -332,31 +340,12 @@ def _world_frame(xpos, xquat, xmat, xipos, ximat):
     for k in range(9):
         xmat[0, k] = 0.0
         ximat[0, k] = 0.0
-    for k in (0, 4, 8):
-        xmat[0, k] = 1.0
-        ximat[0, k] = 1.0
-
-
-@njit
-def _joint_rotation(qloc, t, qpos, a, qpos0_a, axis):
-    """Local rotation ``qloc`` (wxyz) of a ball joint (its quaternion) or a hinge (angle
-    ``qpos[a] - qpos0_a`` [rad] about ``axis``)."""
-    if t == BALL:
-        for k in range(4):
-            qloc[k] = qpos[a + k]
-    else:
-        ang = qpos[a] - qpos0_a
-        if ang == 0:
-            qloc[0] = 1.0
-            qloc[1] = 0.0
-            qloc[2] = 0.0
-            qloc[3] = 0.0
-        else:
-            s = math.sin(ang * 0.5)
-            qloc[0] = math.cos(ang * 0.5)
-            qloc[1] = axis[0] * s
-            qloc[2] = axis[1] * s
-            qloc[3] = axis[2] * s
+    xmat[0, 0] = 1.0
+    xmat[0, 4] = 1.0
+    xmat[0, 8] = 1.0
+    ximat[0, 0] = 1.0
+    ximat[0, 4] = 1.0
+    ximat[0, 8] = 1.0
 
 
 @njit
@@ -387,13 +376,11 @@ def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
 def fk_sites(sites, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
              ximat, site_xpos, site_xmat, work):
     """World pose of the chosen ``sites`` (k,) into ``site_xpos (k, 3)``, ``site_xmat (k, 9)``
-    (``work``: at least 7 floats)."""
-    tmp4 = work[0:4]
-    tmp3 = work[4:7]
+    (``work`` is unused, kept for the signature)."""
     for n in range(sites.shape[0]):
         s = sites[n]
-        _local2global(site_xpos[n], site_xmat[n], site_pos[s], site_quat[s], site_body[s],
-                      site_sameframe[s], xpos, xquat, xmat, xipos, ximat, tmp4, tmp3)
+        _l2g(site_xpos, site_xmat, n, site_pos, site_quat, s, site_body[s], site_sameframe[s],
+             xpos, xquat, xmat, xipos, ximat)
 
 
 @njit

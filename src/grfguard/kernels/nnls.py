@@ -6,12 +6,13 @@ The pure-Python path solves, over the ``k`` corners in contact,
 
 with ``scipy.optimize.nnls`` (``rho = 100``, ``w = qp_weight``) and rescales ``N`` to sum
 to ``F``. The problem is strictly convex (``w > 0``), so its minimiser is unique and any
-exact method finds it: here Lawson-Hanson's active set with every sub-problem solved as
-a correction ``u = N - N_prior`` by a Householder QR of ``[B; sqrt(w) I]`` (``B`` the three
-rows ``rel^T`` and ``rho 1^T``). Working on the correction keeps the rounding relative to
-the (small) correction instead of to the forces, and the multiplier of the sum row is
-taken from the free corners' optimality conditions instead of the ``rho^2``-amplified
-residual. The only difference to ``nnls`` is rounding (tests: a few 1e-12 N).
+exact method finds it: here the unconstrained minimiser when it is positive (the usual
+case), else Lawson-Hanson's active set, every sub-problem solved as a correction
+``u = N - N_prior`` in closed form (:func:`_ls_correction`: a 2 x 2 system in centred
+coordinates, O(k)). Working on the correction keeps the rounding relative to the (small)
+correction instead of to the forces, and the multiplier of the sum row is taken from the
+free corners' optimality conditions instead of the ``rho^2``-amplified residual. The only
+difference to ``nnls`` is rounding (tests: a few 1e-12 N).
 """
 
 from __future__ import annotations
@@ -32,10 +33,81 @@ MAX_CORNERS = 16
 
 @njit
 def _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
+    """Least squares on the free corners (:func:`_ls_closed_form`, or the QR when the
+    corners are close to a line)."""
+    if not _ls_closed_form(rel, prior, total, sw, free, nfree, z):
+        _ls_correction_qr(rel, prior, total, sw, free, nfree, z, M, rhs, dots)
+
+
+@njit
+def _ls_closed_form(rel, prior, total, sw, free, nfree, z):
     """Least squares on the free corners: ``z[free] = prior + u``; other entries untouched.
 
-    ``M`` ((3 + K) x K) and ``rhs`` (3 + K) are scratch.
+    ``min_u |B u - d|^2 + w |u|^2`` with ``B = [rho 1^T; rel^T]`` has the solution
+    ``u = B^T lam``, ``(B B^T + w I) lam = d`` (3 x 3). Eliminating the heavy sum row
+    leaves a 2 x 2 system in centred coordinates (``c`` ~ the free corners' centroid):
+
+        (sum (x_i - c)(x_i - c)^T + a (1 - k a) s s^T + w I) m = -sum (x_i - c) p_i - c F
+        u_i = a (F - sum p) + (x_i - c)^T m,    a = rho^2 / (rho^2 k + w),  c = a s
+
+    (``s`` = sum of the free corners' ``rel``). Every term is formed without
+    cancellation, so the rounding stays relative to the correction: O(k) work instead of
+    a QR of the (3 + k) x k system. When the free corners are close to a line (the 2 x 2
+    matrix has a condition number above about 100) the multipliers grow like 1/w and
+    their rounding would show: then nothing is written and False returned.
     """
+    k = nfree
+    w = sw * sw
+    r2 = RHO * RHO
+    den = r2 * k + w
+    a = r2 / den
+    sx = 0.0
+    sy = 0.0
+    sp = 0.0
+    for c in range(k):
+        j = free[c]
+        sx += rel[j, 0]
+        sy += rel[j, 1]
+        sp += prior[j]
+    c0 = a * sx
+    c1 = a * sy
+    e = a * (w / den)
+    m00 = w + e * sx * sx
+    m01 = e * sx * sy
+    m11 = w + e * sy * sy
+    r0 = -c0 * total
+    r1 = -c1 * total
+    for c in range(k):
+        j = free[c]
+        dx = rel[j, 0] - c0
+        dy = rel[j, 1] - c1
+        m00 += dx * dx
+        m01 += dx * dy
+        m11 += dy * dy
+        r0 -= dx * prior[j]
+        r1 -= dy * prior[j]
+    if (m00 * m11 - m01 * m01) < 0.01 * (m00 + m11) * (m00 + m11):
+        return False
+    # 2 x 2 Cholesky (the matrix is positive definite: w > 0)
+    l00 = math.sqrt(m00)
+    l10 = m01 / l00
+    l11 = math.sqrt(m11 - l10 * l10)
+    y0 = r0 / l00
+    y1 = (r1 - l10 * y0) / l11
+    g1 = y1 / l11
+    g0 = (y0 - l10 * g1) / l00
+    base = a * (total - sp)
+    for c in range(k):
+        j = free[c]
+        z[j] = prior[j] + (base + ((rel[j, 0] - c0) * g0 + (rel[j, 1] - c1) * g1))
+    return True
+
+
+@njit
+def _ls_correction_qr(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
+    """:func:`_ls_correction` by a Householder QR of ``[B; sqrt(w) I]`` (heavy row
+    first); ``M`` ((3 + K) x K) and ``rhs`` (3 + K) are scratch. Used when the corners
+    are close to a line (the closed form would divide by a near-zero spread)."""
     k = nfree
     nr = 3 + k
     # B p - d  ->  rhs = d - B p
@@ -117,6 +189,22 @@ def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
         M, rhs, dots: scratch of :func:`_ls_correction`.
     """
     w2 = sw * sw
+    # The problem is strictly convex: when the unconstrained minimiser over every corner
+    # is positive it is the answer (the usual case with a compliance prior), one solve
+    # instead of n active-set steps. Otherwise (or when the corners are close to a line,
+    # where the QR's rounding depends on the corners' order) Lawson-Hanson from x = 0.
+    for j in range(n):
+        free[j] = j
+    inside = _ls_closed_form(rel, prior, total, sw, free, n, z)
+    if inside:
+        for j in range(n):
+            if not z[j] > 0.0:
+                inside = False
+                break
+    if inside:
+        for j in range(n):
+            x[j] = z[j]
+        return
     for j in range(n):
         x[j] = 0.0
         isfree[j] = 0

@@ -35,6 +35,7 @@ from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
+from numpy.lib.stride_tricks import as_strided
 from scipy.signal import butter, lfilter_zi
 
 from grfguard.errors import ConfigError, LogFormatError
@@ -72,6 +73,13 @@ _S_FIXED = 60
 
 def _state_size(nbr: int, order: int) -> int:
     return _S_FIXED + 15 * order + 12 * nbr
+
+
+@njit(inline="always")
+def _v2(a, o, n, m):
+    """(n, m) C-contiguous view of ``a[o : o + n * m]`` (8-byte items) without numpy's
+    reshape call (which costs about 20 ns in compiled code)."""
+    return as_strided(a[o:], (n, m), (m * 8, 8))
 
 
 @njit(inline="always")
@@ -126,8 +134,8 @@ def _sum_seq(a, n):
 
 
 @njit
-def vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
-             tree, sites, ws, iws):
+def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
+          tree, sites, ws, iws):
     """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
 
     ``state`` is updated in place (only for a valid sample). ``prm``, ``iprm``,
@@ -215,24 +223,69 @@ def _valid_sample(x, y, state, prm):
 @njit
 def _scratch_views(ws, nq, nb):
     """Named views into the float scratch ``ws`` (fixed layout); the last one is the
-    rest of ``ws`` (solver and FK work space)."""
-    sizes = (nq, 3 * nb, 4 * nb, 9 * nb, 3 * nb, 9 * nb, 3 * nb, nb, 33, 99, nq, 9, 9, 3, 3,
-             3, 3, 24, 8, 8, 16, 8, 3, 3, 8, 8, 88, 11, 8)
-    o = [0] * (len(sizes) + 1)
-    for i in range(len(sizes)):
-        o[i + 1] = o[i] + sizes[i]
-    return (ws[o[0] : o[1]], ws[o[1] : o[2]].reshape((nb, 3)),
-            ws[o[2] : o[3]].reshape((nb, 4)), ws[o[3] : o[4]].reshape((nb, 9)),
-            ws[o[4] : o[5]].reshape((nb, 3)), ws[o[5] : o[6]].reshape((nb, 9)),
-            ws[o[6] : o[7]].reshape((nb, 3)), ws[o[7] : o[8]],
-            ws[o[8] : o[9]].reshape((11, 3)), ws[o[9] : o[10]].reshape((11, 9)),
-            ws[o[10] : o[11]], ws[o[11] : o[12]], ws[o[12] : o[13]], ws[o[13] : o[14]],
-            ws[o[14] : o[15]], ws[o[15] : o[16]], ws[o[16] : o[17]],
-            ws[o[17] : o[18]].reshape((8, 3)), ws[o[18] : o[19]], ws[o[19] : o[20]],
-            ws[o[20] : o[21]].reshape((8, 2)), ws[o[21] : o[22]], ws[o[22] : o[23]],
-            ws[o[23] : o[24]], ws[o[24] : o[25]], ws[o[25] : o[26]],
-            ws[o[26] : o[27]].reshape((11, 8)), ws[o[27] : o[28]], ws[o[28] : o[29]],
-            ws[o[29] :])
+    rest of ``ws`` (solver and FK work space). No allocation, no reshape call."""
+    o = 0
+    qpos = ws[o : o + nq]
+    o += nq
+    xpos = _v2(ws, o, nb, 3)
+    o += 3 * nb
+    xquat = _v2(ws, o, nb, 4)
+    o += 4 * nb
+    xmat = _v2(ws, o, nb, 9)
+    o += 9 * nb
+    xipos = _v2(ws, o, nb, 3)
+    o += 3 * nb
+    ximat = _v2(ws, o, nb, 9)
+    o += 9 * nb
+    stc = _v2(ws, o, nb, 3)
+    o += 3 * nb
+    msub = ws[o : o + nb]
+    o += nb
+    sxp = _v2(ws, o, 11, 3)
+    o += 33
+    sxm = _v2(ws, o, 11, 9)
+    o += 99
+    qin = ws[o : o + nq]
+    o += nq
+    raw = ws[o : o + 9]
+    o += 9
+    main = ws[o : o + 9]
+    o += 9
+    v3a = ws[o : o + 3]
+    o += 3
+    v3b = ws[o : o + 3]
+    o += 3
+    v3c = ws[o : o + 3]
+    o += 3
+    v3d = ws[o : o + 3]
+    o += 3
+    pk = _v2(ws, o, 8, 3)
+    o += 24
+    tmp8 = ws[o : o + 8]
+    o += 8
+    prior8 = ws[o : o + 8]
+    o += 8
+    rel8 = _v2(ws, o, 8, 2)
+    o += 16
+    forces = ws[o : o + 8]
+    o += 8
+    lin = ws[o : o + 3]
+    o += 3
+    cc = ws[o : o + 3]
+    o += 3
+    qp_x = ws[o : o + 8]
+    o += 8
+    qp_z = ws[o : o + 8]
+    o += 8
+    qp_M = _v2(ws, o, 11, 8)
+    o += 88
+    qp_rhs = ws[o : o + 11]
+    o += 11
+    qp_dots = ws[o : o + 8]
+    o += 8
+    return (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a,
+            v3b, v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs,
+            qp_dots, ws[o:])
 
 
 @njit
@@ -416,10 +469,8 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
     """Rate of the angular momentum about the CoM (``raw[3:6]``) [N m] from this and the
     previous body poses (kept in ``state``)."""
     nbr = nb - 1
-    pb = state[_S_FIXED + 15 * order : _S_FIXED + 15 * order + 3 * nbr].reshape((nbr, 3))
-    pr = state[_S_FIXED + 15 * order + 3 * nbr : _S_FIXED + 15 * order + 12 * nbr].reshape(
-        (nbr, 9)
-    )
+    pb = _v2(state, _S_FIXED + 15 * order, nbr, 3)
+    pr = _v2(state, _S_FIXED + 15 * order + 3 * nbr, nbr, 9)
     if state[_S_PREVF] != 0.0:
         msum = prm[_P_BODY_MASS_SUM]
         for k in range(3):
@@ -508,9 +559,9 @@ def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v
     """Low-pass the raw rates and (if used) fuse the accelerometer; returns the total
     force ``F0, F1, F2`` [N] and the angular momentum rate ``ld0, ld1`` [N m]."""
     zo = _S_FIXED
-    zlp = state[zo : zo + 9 * order].reshape((order, 9))
-    zfu = state[zo + 9 * order : zo + 12 * order].reshape((order, 3))
-    zac = state[zo + 12 * order : zo + 15 * order].reshape((order, 3))
+    zlp = _v2(state, zo, order, 9)
+    zfu = _v2(state, zo + 9 * order, order, 3)
+    zac = _v2(state, zo + 12 * order, order, 3)
     _lfilter_step(filt_b[0], filt_a[0], zlp, raw, main, filt_zi[0], state[_S_LP_OK] == 0.0)
     state[_S_LP_OK] = 1.0
     if prm[_P_USE_ACC] != 0.0:
@@ -628,7 +679,7 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
         # compact copies for the solver
         for c in range(m):
             tmp8[c] = prior8[cidx[c]]
-        relc = work[0 : 2 * m].reshape((m, 2))
+        relc = _v2(work, 0, m, 2)
         for c in range(m):
             relc[c, 0] = rel8[cidx[c], 0]
             relc[c, 1] = rel8[cidx[c], 1]
@@ -680,54 +731,41 @@ def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
 
 
 @njit
-def vfs_run(X, Y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree,
-            sites, ws, iws):
-    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
-    number of valid samples."""
-    n = 0
-    for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws):
-            n += 1
-    return n
-
-
-@njit
 def _unpack(cf, ci):
     nb, nj, nq, ns, order = ci[0], ci[1], ci[2], ci[3], ci[4]
     nbr = nb - 1
     o = 0
     prm = cf[o : o + N_PRM]
     o += N_PRM
-    body_inertia = cf[o : o + 3 * nbr].reshape((nbr, 3))
+    body_inertia = _v2(cf, o, nbr, 3)
     o += 3 * nbr
     corner_radius = cf[o : o + 8]
     o += 8
-    filt_b = cf[o : o + 3 * (order + 1)].reshape((3, order + 1))
+    filt_b = _v2(cf, o, 3, order + 1)
     o += 3 * (order + 1)
-    filt_a = cf[o : o + 3 * (order + 1)].reshape((3, order + 1))
+    filt_a = _v2(cf, o, 3, order + 1)
     o += 3 * (order + 1)
-    filt_zi = cf[o : o + 3 * order].reshape((3, order))
+    filt_zi = _v2(cf, o, 3, order)
     o += 3 * order
-    body_pos = cf[o : o + 3 * nb].reshape((nb, 3))
+    body_pos = _v2(cf, o, nb, 3)
     o += 3 * nb
-    body_quat = cf[o : o + 4 * nb].reshape((nb, 4))
+    body_quat = _v2(cf, o, nb, 4)
     o += 4 * nb
-    body_ipos = cf[o : o + 3 * nb].reshape((nb, 3))
+    body_ipos = _v2(cf, o, nb, 3)
     o += 3 * nb
-    body_iquat = cf[o : o + 4 * nb].reshape((nb, 4))
+    body_iquat = _v2(cf, o, nb, 4)
     o += 4 * nb
     body_mass = cf[o : o + nb]
     o += nb
-    jnt_axis = cf[o : o + 3 * nj].reshape((nj, 3))
+    jnt_axis = _v2(cf, o, nj, 3)
     o += 3 * nj
-    jnt_pos = cf[o : o + 3 * nj].reshape((nj, 3))
+    jnt_pos = _v2(cf, o, nj, 3)
     o += 3 * nj
     qpos0 = cf[o : o + nq]
     o += nq
-    site_pos = cf[o : o + 3 * ns].reshape((ns, 3))
+    site_pos = _v2(cf, o, ns, 3)
     o += 3 * ns
-    site_quat = cf[o : o + 4 * ns].reshape((ns, 4))
+    site_quat = _v2(cf, o, ns, 4)
     i = 5
     iprm = ci[i : i + N_IPRM]
     i += N_IPRM
@@ -753,28 +791,48 @@ def _unpack(cf, ci):
 
 
 @njit
-def vfs_step_packed(x, y, state, cf, ci, ws, iws):
-    """:func:`vfs_step` with every constant packed into two arrays ``cf`` (float) and ``ci``
-    (int) (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`): seven arguments, so a call from
-    Python spends little time converting them."""
+def vfs_step(x, y, state, cf, ci, ws, iws):
+    """One sample of the compiled virtual force sensor (callable from other ``@njit`` code).
+
+    Stable signature for callers inside compiled code (e.g. a whole-monitor step):
+
+    Args:
+        x: (24,) float64 input row, :data:`IN_COLUMNS` order (NaN where absent).
+        y: (22,) float64 output row, :data:`OUT_COLUMNS` order (written).
+        state: float64 state of one sensor (:attr:`VFSKernel.state`; updated in place).
+        cf, ci: float64 / int64 packed constants (:attr:`VFSKernel.cf`, :attr:`VFSKernel.ci`;
+            read only; their layout is internal to this module).
+        ws, iws: float64 / int64 scratch (:attr:`VFSKernel.ws`, :attr:`VFSKernel.iws`).
+
+    Returns:
+        True for a valid sample; False when the row was not usable (``y`` then repeats
+        the last output with ``vfs_valid = 0``, NaN before the first valid sample).
+
+    ``VFSKernel.packed_args()`` gives ``(state, cf, ci, ws, iws)``. No allocation, no
+    Python objects; the same function runs behind :meth:`VFSKernel.step` (streaming) and
+    :func:`vfs_run` (batch), so both agree bit for bit.
+    """
     prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
         cf, ci)
-    return vfs_step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws)
+    return _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                 filt_zi, tree, sites, ws, iws)
 
 
 @njit
-def vfs_run_packed(X, Y, state, cf, ci, ws, iws):
-    """:func:`vfs_step_packed` over every row of ``X`` (T, 24) into ``Y`` (T, 22); returns the
-    number of valid samples (the batch path: the same step as streaming)."""
-    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
-        cf, ci)
+def vfs_run(X, Y, state, cf, ci, ws, iws):
+    """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22) in one compiled
+    loop (the batch path: the same step as streaming); returns the number of valid
+    samples. Arguments after ``X, Y`` as in :func:`vfs_step`."""
     n = 0
     for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                    filt_zi, tree, sites, ws, iws):
+        if vfs_step(X[t], Y[t], state, cf, ci, ws, iws):
             n += 1
     return n
+
+
+#: Former names of :func:`vfs_step` / :func:`vfs_run`.
+vfs_step_packed = vfs_step
+vfs_run_packed = vfs_run
 
 
 class VFSKernel:
@@ -914,17 +972,12 @@ class VFSKernel:
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
             if a > 0:
                 self.resync()
-            vfs_run_packed(X[a:b], Y[a:b], *self.packed_args())
+            vfs_run(X[a:b], Y[a:b], *self.packed_args())
         return Y
-
-    def _args(self) -> tuple:
-        return (self.state, self.prm, self.iprm, self.body_inertia, self.corner_radius,
-                self.filt_b, self.filt_a, self.filt_zi, self.tree_arrays, self.site_arrays,
-                self.ws, self.iws)
 
     def packed_args(self) -> tuple:
         """``(state, cf, ci, ws, iws)``: the arguments after ``x, y`` of
-        :func:`vfs_step_packed` / ``X, Y`` of :func:`vfs_run_packed`."""
+        :func:`vfs_step` / ``X, Y`` of :func:`vfs_run`."""
         return (self.state, self.cf, self.ci, self.ws, self.iws)
 
     def step(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
@@ -944,14 +997,14 @@ class VFSKernel:
         if ep is not None and y.flags.c_contiguous and y.dtype == np.float64:
             ep(*args)
             return y
-        vfs_step_packed(*args)
+        vfs_step(*args)
         if ep is None and y.flags.c_contiguous and y.dtype == np.float64:
             # the compiled entry point for exactly these argument types skips the
             # dispatcher's type resolution (about 1 us per call)
             import numba
 
             sig = tuple(numba.typeof(a) for a in args)
-            cres = vfs_step_packed.overloads.get(sig)
+            cres = vfs_step.overloads.get(sig)
             self._entry = cres.entry_point if cres is not None else None
         return y
 
@@ -965,7 +1018,7 @@ class VFSKernel:
                 f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
             )
         Y = np.empty((X.shape[0], N_OUT))
-        vfs_run_packed(X, Y, *self.packed_args())
+        vfs_run(X, Y, *self.packed_args())
         return Y
 
 
@@ -1005,91 +1058,11 @@ def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
     return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
 
 
-def _base_sensor():
-    from grfguard.estimate.vfs import VirtualForceSensor
+def __getattr__(name: str):
+    # the compiled sensor is grfguard.estimate.vfs.VirtualForceSensor itself (it runs this
+    # kernel whenever the settings are covered); the old name stays importable
+    if name == "CompiledVirtualForceSensor":
+        from grfguard.estimate.vfs import VirtualForceSensor
 
-    return VirtualForceSensor
-
-
-class CompiledVirtualForceSensor(_base_sensor()):  # type: ignore[misc]
-    """Drop-in :class:`~grfguard.estimate.vfs.VirtualForceSensor` running the compiled step.
-
-    Same constructor, ``for_log``, ``reset``, ``update(row) -> dict`` and
-    ``run(log) -> DataFrame``; plus the array call :meth:`update_array`. Settings the
-    kernel does not cover (see :meth:`VFSKernel.supports`) fall back to the pure-Python
-    sensor. ``update`` assumes the gyro and planned contact are present in every row
-    (the log contract of a live robot); ``run`` reads what the log has.
-
-    Example:
-        >>> vfs = CompiledVirtualForceSensor.for_log(log)
-        >>> out = vfs.run(log)                      # same columns as the Python sensor
-        >>> mon = Monitor(MonitorConfig(), vfs)     # the monitor takes it as it is
-    """
-
-    def __init__(self, robot=None, config=None, kinematics=None) -> None:
-        super().__init__(robot, config, kinematics)
-        self.compiled = VFSKernel.supports(self.config)
-        self._kern = {}
-        self._y = np.empty(N_OUT)
-        self._x = np.empty(N_IN)
-
-    def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> VFSKernel:
-        """The compiled kernel for inputs with / without gyro and planned contact."""
-        key = (has_gyro, has_ref)
-        if key not in self._kern:
-            self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
-        return self._kern[key]
-
-    def reset(self) -> None:
-        super().reset()
-        for k in getattr(self, "_kern", {}).values():
-            k.reset()
-
-    def resync(self) -> None:
-        """Forget the finite-difference history only (the monitor's continuity break)."""
-        super().resync()
-        for k in self._kern.values():
-            k.resync()
-
-    def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
-        """``run`` with :meth:`resync` before every row where ``resync`` is True (the batch
-        twin of a streaming monitor resyncing at breaks)."""
-        if not self.compiled:
-            return super().run_resynced(log, resync)
-        super().reset()
-        self.check_columns(log.columns)
-        X, has_gyro, has_ref = log_to_array(log)
-        k = self.kernel(has_gyro, has_ref)
-        Y = k.run_segments(X, np.flatnonzero(np.asarray(resync, bool)))
-        k.reset()
-        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
-
-    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        """One sample as arrays: ``x`` (24,) in :data:`IN_COLUMNS` order -> (22,) in
-        :data:`OUT_COLUMNS` order (written into ``y`` when given). Never raises on a bad
-        sample (non-finite input: last output held, ``vfs_valid = 0``)."""
-        if y is None:
-            y = np.empty(N_OUT)
-        return self.kernel().step(x, y)
-
-    def update(self, row: Mapping[str, float]) -> dict[str, float]:
-        if not self.compiled:
-            return super().update(row)
-        x = self._x
-        for i, c in enumerate(IN_COLUMNS):
-            try:
-                x[i] = float(row[c])
-            except (KeyError, TypeError, ValueError):
-                x[i] = np.nan
-        y = self.update_array(x, self._y)
-        return dict(zip(OUT_COLUMNS, y.tolist(), strict=True))
-
-    def run(self, log: pd.DataFrame) -> pd.DataFrame:
-        if not self.compiled:
-            return super().run(log)
-        super().reset()
-        self.check_columns(log.columns)
-        X, has_gyro, has_ref = log_to_array(log)
-        k = self.kernel(has_gyro, has_ref)
-        Y = k.run(X)
-        return pd.DataFrame(Y, index=log.index, columns=list(OUT_COLUMNS))
+        return VirtualForceSensor
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
