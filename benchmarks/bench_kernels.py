@@ -36,13 +36,13 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import mujoco
 import numpy as np
 from _common import update_section
 
 from grfguard.detect import Monitor, MonitorConfig
-from grfguard.estimate.compliance import _solve_core
 from grfguard.estimate.vfs import VirtualForceSensor
 from grfguard.kernels import CompiledVirtualForceSensor, vfs_batch, warm_up
 from grfguard.kernels.fk import TreeModel, fk_batch
@@ -50,7 +50,10 @@ from grfguard.kernels.nnls import new_scratch, prior_qp
 from grfguard.kernels.vfs import log_to_array
 from grfguard.model.mjcf import build_model
 from grfguard.model.robot import SURALP
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
+from reference.nnls_split import nnls_prior_qp as _solve_core  # noqa: E402  (scipy nnls)
 
 SECTION = "## Compiled kernels"
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))

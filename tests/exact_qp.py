@@ -32,3 +32,30 @@ def reference_qp(
                            solver="daqp")
     assert x is not None, "daqp failed"
     return x
+
+
+def package_qp(
+    points: np.ndarray,
+    d: np.ndarray,
+    total: np.ndarray,
+    w: float,
+    allowed: np.ndarray | None = None,
+) -> np.ndarray:
+    """The package's corner QP (:func:`grfguard.estimate.compliance.qp_split`) in the form
+    of :func:`reference.corner_qp.solve_corner_qp`: points (n, 2) fixed or (T, n, 2),
+    ``d = F_z CoP`` (T, 2) [N m], totals (T,) [N]; the rigid / paper problem is the uniform
+    prior ``F_z / n`` with the points taken relative to the CoP. A loaded sample with no
+    allowed corner carries nothing (zeros), as in the virtual force sensor."""
+    from grfguard.estimate.compliance import qp_split
+
+    b = np.asarray(total, float).reshape(-1)
+    T = b.size
+    dd = np.asarray(d, float).reshape(T, 2)
+    pts = np.broadcast_to(np.asarray(points, float), (T, *np.shape(points)[-2:]))
+    loaded = b > 0
+    cop = np.zeros((T, 2))
+    cop[loaded] = dd[loaded] / b[loaded, None]
+    cop[~np.isfinite(dd).all(axis=1)] = np.nan
+    ok = np.ones(pts.shape[:2], bool) if allowed is None else np.asarray(allowed, bool)
+    prior = np.where(ok, (b / np.maximum(ok.sum(axis=1), 1))[:, None], 0.0)
+    return qp_split(pts - cop[:, None, :], prior, b, w, ok)

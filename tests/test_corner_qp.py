@@ -1,4 +1,6 @@
-"""The exact corner QP (estimate.corner_qp) against daqp, known answers, degenerate input."""
+"""The package's corner QP (estimate.compliance.qp_split, the compiled solver, in the form of
+the exact reference tests/reference/corner_qp.py) against daqp and the exact enumeration,
+known answers, degenerate input."""
 
 from __future__ import annotations
 
@@ -8,12 +10,13 @@ import sys
 import numpy as np
 import pytest
 
-from grfguard.estimate.corner_qp import solve_corner_qp
 from grfguard.model.robot import SURALP
 
 pytest.importorskip("qpsolvers")
 pytest.importorskip("daqp")
-from exact_qp import reference_qp  # noqa: E402  (tests/, after the skip)
+from exact_qp import package_qp as solve_corner_qp  # noqa: E402  (tests/, after the skip)
+from exact_qp import reference_qp  # noqa: E402
+from reference.corner_qp import solve_corner_qp as exact_corner_qp  # noqa: E402
 
 SOLE = SURALP.sensor_positions_in_foot()  # (4, 2) [m]
 PAPER_WEIGHT = 1e-2  # the paper's W = 0.01 I [m²]
@@ -97,6 +100,26 @@ def test_paper_weight_pulls_cop_to_centre() -> None:
     assert np.allclose(rec[inner], cop[inner] * fac, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("fixed", [True, False])
+def test_matches_the_exact_enumeration(fixed: bool) -> None:
+    """The package's solver (penalty row + rescale) against the exact free-set enumeration
+    in extended precision (tests/reference/corner_qp.py, the former package solver)."""
+    rng = np.random.default_rng(11 + fixed)
+    T = 2000
+    b = rng.uniform(-50.0, 1200.0, T)
+    if fixed:
+        pts, allowed, w = SOLE, None, PAPER_WEIGHT
+        d = np.maximum(b, 0.0)[:, None] * rng.uniform(SOLE.min(0) - 0.03, SOLE.max(0) + 0.03,
+                                                      (T, 2))
+    else:
+        pts, w = rng.uniform(-0.3, 0.3, (T, 8, 2)), 1e-6
+        allowed = rng.random((T, 8)) < 0.7
+        allowed[:, 0] = True
+        d = np.zeros((T, 2))
+    gap = np.abs(solve_corner_qp(pts, d, b, w, allowed) - exact_corner_qp(pts, d, b, w, allowed))
+    assert gap.max() <= 1e-6  # [N]; measured 3e-13 (fixed sole) and 5e-12 (8 corners)
+
+
 def test_degenerate_input() -> None:
     d = np.array([[0.0, 0.0], [np.nan, 0.0], [10.0, 5.0], [0.0, 0.0], [1.0, 1.0]])
     b = np.array([400.0, 400.0, 400.0, np.inf, -20.0])
@@ -106,9 +129,9 @@ def test_degenerate_input() -> None:
     pts = np.broadcast_to(SOLE, (3, 4, 2)).copy()
     pts[1, 2, 0] = np.nan
     allowed = np.ones((3, 4), bool)
-    allowed[2] = False  # loaded but nothing may carry it: infeasible
+    allowed[2] = False  # loaded but nothing may carry it: nothing carried
     g = solve_corner_qp(pts, np.zeros((3, 2)), np.full(3, 100.0), 1e-6, allowed)
-    assert np.allclose(g[0], 25.0) and np.isnan(g[1]).all() and np.isnan(g[2]).all()
+    assert np.allclose(g[0], 25.0) and np.isnan(g[1]).all() and np.all(g[2] == 0.0)
     coincident = np.array([[0.1, 0.0], [0.1, 0.0], [-0.1, 0.0]])
     h = solve_corner_qp(coincident, np.array([[30.0, 0.0]]), np.array([300.0]), 1e-6)[0]
     assert h[0] == pytest.approx(h[1], rel=1e-9) and h.sum() == pytest.approx(300.0, rel=1e-12)
@@ -118,8 +141,8 @@ def test_no_qp_library_imported_at_run_time() -> None:
     code = (
         "import sys, numpy as np\n"
         "import grfguard.estimate.vfs\n"
-        "from grfguard.estimate.corner_qp import solve_corner_qp\n"
-        "solve_corner_qp(np.eye(2), np.zeros((1, 2)), np.ones(1), 1e-6)\n"
+        "from grfguard.estimate.compliance import qp_split\n"
+        "qp_split(np.eye(2)[None], np.ones((1, 2)), np.ones(1), 1e-6)\n"
         "print(sorted(m for m in ('quadprog', 'qpsolvers', 'daqp') if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -144,7 +167,7 @@ def test_compliance_split_is_the_exact_optimum_on_a_walk(monkeypatch) -> None:
 
     monkeypatch.setattr(vfs_mod, "split_with_prior", spy)
     log = simulate(gait=GaitConfig(duration=7.0), noise=NoiseConfig(), seed=2)
-    VirtualForceSensor.for_log(log).run(log)
+    VirtualForceSensor.for_log(log, compiled=False).run(log)  # the Python stages' split
     corners, contact, zmp, total, w, k = seen["args"]
     ds = np.flatnonzero(contact.all(axis=1))
     ss = np.flatnonzero(contact.sum(axis=1) == 4)

@@ -109,7 +109,9 @@ def test_shipped_channel_config_is_checked() -> None:
         ChannelConfig.from_toml_text("[channels]\nh = 3.0\n")
 
 
-def test_cli_run_on_a_talos_log(tmp_path, talos) -> None:
+def test_cli_run_on_a_talos_log(tmp_path, talos, walk) -> None:
+    """`grfguard run` with the shipped channel thresholds, and `grfguard calibrate` on a
+    fault-free Talos log writing channel thresholds that `run --thresholds` takes."""
     from typer.testing import CliRunner
 
     from grfguard.cli import app
@@ -127,3 +129,86 @@ def test_cli_run_on_a_talos_log(tmp_path, talos) -> None:
     assert flagged == ["ft_l_tx"]
     assert out.loc[out["flag_ft_l_tx"], "time"].min() - 3.0 <= 0.5
     assert out["kind_ft_l_tx"].iloc[-1] == "offset"
+
+    write_log(walk, tmp_path / "clean.parquet")  # seed 1, fault-free
+    r = CliRunner().invoke(app, ["calibrate", str(tmp_path / "clean.parquet"),
+                                 "-o", str(tmp_path / "ch.toml")])
+    assert r.exit_code == 0, r.output
+    assert "[channels.sigma]" in (tmp_path / "ch.toml").read_text()
+    r = CliRunner().invoke(app, ["run", str(tmp_path / "talos.parquet"), "--thresholds",
+                                 str(tmp_path / "ch.toml"), "-o", str(tmp_path / "o2.parquet")])
+    assert r.exit_code == 0, r.output
+    out = read_log(tmp_path / "o2.parquet")
+    assert out.attrs["channel_monitor"]["source"].startswith("calibrated on 1")
+    assert out.loc[out["flag_ft_l_tx"], "time"].min() - 3.0 <= 0.5
+
+
+@pytest.fixture(scope="module")
+def one_foot(talos, walk):
+    """The paper's scenario transposed to four channels of the right F/T sensor at once
+    (w = 9 % of the weight; x foot length for torques): fz frozen at 0, fx +w, tx drift
+    w per s, ty -w; and on the left foot an offset of +w on fz from 7.0 s to 7.6 s only."""
+    W, WL = _scales(talos)
+    w, wt = 0.09 * W, 0.09 * WL
+    faults = {"ft_r_fz": "frozen:0@5", "ft_r_fx": f"offset:{w:.2f}@5",
+              "ft_r_tx": f"drift:{wt:.2f}@5", "ft_r_ty": f"offset:{-wt:.2f}@5"}
+    faulty = _inject(walk, faults)
+    t = faulty["time"].to_numpy()
+    faulty.loc[(t >= 7.0) & (t < 7.6), "ft_l_fz"] += w
+    return faults, faulty, run_described(faulty, robot=talos)
+
+
+def test_one_foot_four_channels_detected_and_recovered(talos, walk, one_foot) -> None:
+    faults, _, out = one_foot
+    W, WL = _scales(talos)
+    t = out["time"].to_numpy()
+    bound = {"offset": 0.5, "drift": 1.0, "frozen": 0.2}
+    for ch, spec in faults.items():
+        kind = spec.split(":")[0]
+        flag = out[f"flag_{ch}"].to_numpy()
+        first = int(np.argmax(flag))
+        assert flag.any() and not flag[t < ONSET_S].any(), ch
+        assert flag[first:].all(), ch  # a persistent fault's flag never clears
+        assert t[first] - ONSET_S <= bound[kind], ch
+        assert out[f"kind_{ch}"].iloc[-1] == kind, ch
+        if kind == "offset":
+            late = t >= ONSET_S + 1.0
+            err = out[f"recovered_{ch}"].to_numpy()[late] - walk[ch].to_numpy()[late]
+            scale = WL if ch[-2] == "t" else W
+            assert 100 * np.sqrt(np.mean(err**2)) / scale <= 0.5, ch
+    assert not any(out[f"flag_{ch}"].any() for ch in set(CHANNELS) - set(faults) - {"ft_l_fz"})
+
+
+def test_flag_clears_after_an_intermittent_fault(one_foot) -> None:
+    """ft_l_fz carries +w from 7.0 s to 7.6 s: flagged within 0.5 s, cleared within
+    1.5 s after the fault ended, and the recovered channel is the reading again."""
+    _, faulty, out = one_foot
+    t = out["time"].to_numpy()
+    flag = out["flag_ft_l_fz"].to_numpy()
+    assert flag.any() and t[np.argmax(flag)] - 7.0 <= 0.5
+    assert not flag[t >= 7.6 + 1.5].any()
+    assert int(np.abs(np.diff(flag.astype(int))).sum()) == 2  # raised once, cleared once
+    after = t >= 9.1
+    assert (out["kind_ft_l_fz"].to_numpy()[after] == "none").all()
+    np.testing.assert_array_equal(out["recovered_ft_l_fz"].to_numpy()[after],
+                                  faulty["ft_l_fz"].to_numpy()[after])
+
+
+def test_streaming_update_equals_batch(talos, one_foot) -> None:
+    from importlib import resources
+
+    from grfguard.detect.channels import ChannelConfig, ChannelMonitor
+
+    _, faulty, out = one_foot
+    cfg = ChannelConfig.from_toml_text(
+        (resources.files("grfguard") / "data" / "talos_channels.toml").read_text())
+    live = ChannelMonitor(cfg)
+    rows = [live.update(r) for r in faulty.to_dict("records")]
+    for key in rows[0]:
+        got = np.array([r[key] for r in rows])
+        want = out[key].to_numpy()
+        if got.dtype.kind in "fc":
+            np.testing.assert_array_equal(got, want.astype(float), err_msg=key)
+        else:
+            assert (got == want).all(), key
+    assert live.update({"time": 10.5}) is not None  # a sample without channels: no crash

@@ -212,7 +212,11 @@ def check_thresholds_toml(path: str | Path, option: str = "--thresholds") -> Any
     p = Path(path)
     lead = f"{option} {p}"
     doc = read_toml(p, "thresholds file", option)
-    known = _field_names(Thresholds)
+    if "channels" in doc:  # ankle F/T channel thresholds of `grfguard calibrate` (issue 9)
+        from grfguard.detect.channels import ChannelConfig
+
+        return _build(lambda: ChannelConfig.from_toml_text(p.read_text(), str(p)), lead)
+    known = [*_field_names(Thresholds), "const_samples"]  # legacy: a count at 1 kHz
     if "thresholds" in doc:
         _check_table(doc, "thresholds", lead, known)
         extra = sorted(set(doc) - {"thresholds", "model_corrections"})

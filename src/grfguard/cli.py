@@ -304,18 +304,19 @@ def _run_monitor(
 ) -> Any:
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
+    from grfguard.estimate.described import is_described, run_described
 
+    if is_described(df) and df.attrs.get("sensing") == "ft":  # channel thresholds (issue 9)
+        return run_described(df, channels=thresholds)
     cfg = monitor_config(config, thresholds, method, vfs)
     if not compiled:
         cfg = cfg.replace(compiled=False)
-    from grfguard.estimate.described import is_described, run_described
-
     if is_described(df):  # Talos, G1, a robot TOML: the batch wrench estimator (issue 9)
         return run_described(df, cfg)
     if thresholds is not None:  # model corrections of `calibrate --model` (issue 10)
-        from grfguard.cli_calib import corrected_log
+        from grfguard.cli_calib import corrected_log_and_config
 
-        df = corrected_log(df, thresholds)
+        df, cfg = corrected_log_and_config(df, thresholds, cfg)
     return Monitor.for_log(df, config=cfg).run(df)
 
 
@@ -413,8 +414,13 @@ def calibrate(
     frames = [load_log(p) for p in logs]
     for p, f in zip(logs, frames, strict=True):
         robot_for_log(f, rob, str(p))
-    from grfguard.estimate.described import calibration_frames
+    from grfguard.estimate.described import calibration_frames, ft_channel_calibration
 
+    ft_toml = ft_channel_calibration(frames, false_alarm_rate)  # ankle F/T robot (issue 9)
+    if ft_toml is not None:
+        atomic_write_text(output, ft_toml, what="channel thresholds TOML")
+        _say(f"wrote channel thresholds {output} from {len(frames)} log(s)")
+        return
     frames = calibration_frames(frames)  # described robots: their virtual sensor (issue 9)
     total_s = sum(float(f["time"].iloc[-1] - f["time"].iloc[0]) for f in frames)
     if total_s < _MIN_CALIBRATION_S:
@@ -429,7 +435,7 @@ def calibrate(
     if model:  # model corrections first, thresholds on the corrected data (issue 10)
         from grfguard.cli_calib import fit_model_corrections
 
-        frames, corr_toml = fit_model_corrections(frames, mass, console)
+        frames, corr_toml, config = fit_model_corrections(frames, mass, console, config)
     th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")

@@ -5,24 +5,36 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-__all__ = ["fit_model_corrections", "corrected_log"]
+__all__ = ["fit_model_corrections", "corrected_log", "corrected_log_and_config"]
 
 
 def fit_model_corrections(
-    frames: list[Any], mass_kg: float | None, console: Any = None
-) -> tuple[list[Any], str]:
+    frames: list[Any], mass_kg: float | None, console: Any = None, config: Any = None
+) -> tuple[list[Any], str, Any]:
     """Fit :class:`~grfguard.calib.ModelCorrections` on fault-free logs.
 
+    Args:
+        frames: Fault-free logs.
+        mass_kg: Weighed mass [kg] or None.
+        console: Where the summary goes (None: nowhere).
+        config: Monitor config (``MonitorConfig``, a TOML path or None).
+
     Returns:
-        The corrected logs (thresholds are calibrated on them) and the
-        ``[model_corrections]`` TOML text to append to the thresholds file.
+        The corrected logs (thresholds are calibrated on them), the
+        ``[model_corrections]`` TOML text to append to the thresholds file, and the
+        monitor config to calibrate the thresholds with (the accelerometer left out of
+        the virtual sensor when it vibrates).
     """
-    from grfguard.calib import apply_corrections, estimate_corrections
+    from grfguard.calib import apply_corrections, corrected_config, estimate_corrections
+    from grfguard.detect import MonitorConfig
 
     corr = estimate_corrections(frames, measured_mass_kg=mass_kg)
     if console is not None:
         console.print(f"model corrections: {corr.summary()}")
-    return [apply_corrections(f, corr) for f in frames], "\n" + corr.to_toml()
+    if isinstance(config, (str, Path)):
+        config = MonitorConfig.from_toml(config)
+    return ([apply_corrections(f, corr) for f in frames], "\n" + corr.to_toml(),
+            corrected_config(config, corr))
 
 
 def corrected_log(log: Any, thresholds_path: str | Path) -> Any:
@@ -31,3 +43,13 @@ def corrected_log(log: Any, thresholds_path: str | Path) -> Any:
     from grfguard.calib import ModelCorrections, apply_corrections
 
     return apply_corrections(log, ModelCorrections.from_toml(thresholds_path))
+
+
+def corrected_log_and_config(log: Any, thresholds_path: str | Path, config: Any) -> Any:
+    """``(log, config)`` with the ``[model_corrections]`` of the thresholds file applied:
+    the corrected log and the monitor config the corrections call for (the accelerometer
+    left out of the virtual sensor when it vibrated during calibration)."""
+    from grfguard.calib import ModelCorrections, apply_corrections, corrected_config
+
+    corr = ModelCorrections.from_toml(thresholds_path)
+    return apply_corrections(log, corr), corrected_config(config, corr)

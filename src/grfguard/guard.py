@@ -150,9 +150,16 @@ class InputGuard:
                    for c in cols if arr[k, cols.index(c)]}
             for c in cols:
                 if arr[k, cols.index(c)] and not bad.get(c):
-                    bad[c] = f"{c}: IMU quaternion norm is not 1"
+                    bad[c] = self._quat_reason(row)
             reasons[int(k)] = "; ".join(str(bad[c]) for c in sorted(bad))
         return out, reasons
+
+    def _quat_reason(self, row: Any) -> str:
+        """The reason :meth:`clean_row` gives for a quaternion whose norm is not 1."""
+        q = [float(row.get(f"imu_quat_{a}", _NAN)) for a in "wxyz"]
+        n = math.sqrt(sum(x * x for x in q))
+        return (f"IMU quaternion norm {n:.4g} is not 1 "
+                f"(within {self.inputs.ranges.quat_norm_tol})")
 
     def force_implausible(self, value: float) -> bool:
         """True when a (finite or infinite) force reading is outside the range."""

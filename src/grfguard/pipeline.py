@@ -15,6 +15,16 @@ Three stages, each its own module, wired here (the only module that knows all th
 
 :class:`Monitor` streams (``update(row)``, never raises on a bad sample) and batches
 (``run(log)``: reset plus the same steps over the whole log, identical numbers).
+
+Compiled path (the default, ``compiled=True``): when the settings are covered (method
+``default``, no common-mode layer, no diagnostics, the compiled virtual sensor or
+precomputed ``vfs_*`` columns) the guards, virtual sensor, detector, recovery and
+standing layer run as one compiled step per sample (:mod:`grfguard.kernels.monitor`),
+with the same outputs as these Python stages (``tests/test_kernels_detect.py``);
+``update_array(x) -> y`` is that step with flat arrays (layouts in
+:attr:`Monitor.input_columns` / :attr:`Monitor.output_columns`), ``run`` one compiled
+loop over the log. :meth:`Monitor.compiled_reason` says why a monitor runs the Python
+stages instead.
 """
 
 from __future__ import annotations
@@ -32,12 +42,14 @@ from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector
 from grfguard.detect.paper import PaperDetector
 from grfguard.detect.standing import StandingConfig, StandingStage
 from grfguard.detect.system import (
+    AccVibrationDetector,
     CommonModeConfig,
     CommonModeMonitor,
     GyroBiasLearner,
     ImuTiltLearner,
     SwingZeroLearner,
     hold_unarmed_tests,
+    swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
 from grfguard.errors import LogFormatError
@@ -59,6 +71,7 @@ from grfguard.rotations import quat_to_matrix, rotation_to_quat
 __all__ = ["Monitor"]
 
 _NAN = float("nan")
+_UNSET = object()
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
@@ -111,6 +124,13 @@ def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
     order = list(log.columns) + [c for c in new if c not in log.columns]
     keep = log.drop(columns=[c for c in new if c in log.columns])
     return pd.concat([keep, add], axis=1)[order]
+
+
+def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
+    """Whether the log carries the gyro and the planned contact (the compiled virtual
+    sensor's switches)."""
+    return (all(c in log.columns for c in IMU_GYRO),
+            all(f"contact_ref_{s}" in log.columns for s in SIDES))
 
 
 class _Prepared(NamedTuple):
@@ -210,9 +230,13 @@ class Monitor:
         robot: RobotConfig | None = None,
         common_mode: CommonModeConfig | bool = False,
         standing: StandingConfig | bool = True,
+        compiled: bool | None = None,
     ) -> None:
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
+        self.compiled = self.config.compiled if compiled is None else bool(compiled)
+        self._kernels: dict[tuple[bool, bool], Any] = {}
+        self._kernels_for: Any = _UNSET
         self.guard = guard if guard is not None else GuardConfig()
         if robot is None:
             robot = getattr(vfs, "robot", None) or RobotConfig()
@@ -232,6 +256,8 @@ class Monitor:
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
         self.tilt: ImuTiltLearner | None = None
+        self.vibration: AccVibrationDetector | None = None
+        self.vfs_quiet: Any = None
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
@@ -241,6 +267,7 @@ class Monitor:
             if kin is not None and hasattr(kin, "forward"):
                 self.tilt = ImuTiltLearner(kin, self.config.dt_s, learn_s=0.2,
                                            apply_after_s=0.1, every_n=5)
+            self._vibration_setup(vfs)
         self.reset()
 
     @classmethod
@@ -274,17 +301,71 @@ class Monitor:
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
             robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
         return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
-                   standing=standing)
+                   standing=standing, compiled=compiled)
 
     @property
     def sensors(self) -> list[Any]:
         """Per-sensor state of the default detector."""
+        k = self._kernel()
+        if k is not None:
+            from grfguard.kernels.detect import sensor_states
+
+            return sensor_states(k.ss)
         return self.detector.sensors
+
+    def compiled_reason(self) -> str:
+        """Empty when the whole monitor runs compiled (:mod:`grfguard.kernels.monitor`:
+        guards, virtual sensor, default detector and recovery in one compiled step);
+        otherwise why it runs the pure-Python stages."""
+        if not self.compiled:
+            return "compiled=False"
+        if self.config.method != "default":
+            return f"method {self.config.method!r}"
+        if self.common is not None:
+            return "the common-mode layer"
+        if self.config.diagnostics:
+            return "diagnostics"
+        if self.vfs is None:
+            return ""
+        if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
+            return "a pure-Python virtual force sensor"
+        return ""
+
+    def _kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
+        """The compiled monitor step for inputs with / without gyro and planned contact
+        (None when the monitor runs the Python stages)."""
+        if self._kernels_for is not self.vfs:
+            self._kernels = {}
+            self._kernels_for = self.vfs
+            self._compiled_ok = not self.compiled_reason()
+        if not self._compiled_ok:
+            return None
+        key = (has_gyro, has_ref)
+        k = self._kernels.get(key)
+        if k is None:
+            try:
+                from grfguard.kernels.detect import detect_params
+                from grfguard.kernels.monitor import MonitorKernel
+
+                prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
+                                    self.guard, (self.inputs.force_lo, self.inputs.force_hi))
+                vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
+                k = MonitorKernel(prm, self.inputs, vk, self.standing)
+            except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
+                warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
+                              "stages", RuntimeWarning, stacklevel=3)
+                self._compiled_ok = False
+                return None
+            self._kernels[key] = k
+        return k
 
     def reset(self) -> None:
         """Forget everything (filters, flags, contact timeline, VFS state, guards)."""
         if self.vfs is not None:
             self.vfs.reset()
+        if self._kernels_for is self.vfs:
+            for k in self._kernels.values():
+                k.reset()
         self.detector.reset()
         self.paper.reset()
         self.recovery.reset()
@@ -308,6 +389,32 @@ class Monitor:
         self._tilt_rows: np.ndarray | None = None
         self._eye = self.tilt.rotation if self.tilt is not None else None
         self._spike = [False] * len(SENSOR_NAMES)
+        if self.vibration is not None:
+            self.vibration.reset()
+            self.vfs_quiet.reset()
+        self.detector.config = self.config
+        self._vib_active = False
+
+    def _vibration_setup(self, vfs: Any) -> None:
+        """``common_mode``: a twin virtual sensor without the accelerometer, used (with
+        the corner threshold widened) once the accelerometer vibrates
+        (:class:`~grfguard.detect.system.AccVibrationDetector`)."""
+        import dataclasses
+
+        cfg = getattr(vfs, "config", None)
+        if vfs is None or not getattr(cfg, "use_accelerometer", False):
+            return
+        self.vibration = AccVibrationDetector(self.config.dt_s)
+        self.vfs_quiet = type(vfs)(vfs.robot, dataclasses.replace(cfg, use_accelerometer=False),
+                                   vfs.kin)
+        th = self.config.thresholds
+        self._quiet_config = self.config.with_thresholds(dataclasses.replace(
+            th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))
+
+    def _vibration_on(self) -> None:
+        """Switch the detector to the widened corner threshold (once)."""
+        self.detector.config = self._quiet_config
+        self._vib_active = True
 
     def _vfs_row(self, row: Mapping[str, Any]) -> dict[str, float]:
         if self.vfs is not None:
@@ -381,13 +488,16 @@ class Monitor:
                        for ce, cr in zip(p.cest, p.cref, strict=True)]
             z = self.zeros.update(p.x, p.tot, contact, flags)
             x = [a - float(b) for a, b in zip(x, z, strict=True)]
+        v0, tot0 = list(p.v), list(p.tot)
+        swing_load_to_stance(x, v0, tot0, p.cref, self.robot.weight)
+        p = p._replace(v=v0, tot=tot0)
         if self._tilt_now != self._tilt_seen:  # the virtual forces changed: learn anew
             self._tilt_seen = self._tilt_now
             self._tilt_settle_s = 1.0  # the VFS attitude filter settles (2 x 0.5 s)
         if self._tilt_settle_s > 0.0:
             self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
-        cm = self.common.update(x, p.v, valid, frozen=frozen)
+        cm = self.common.update(x, p.v, valid, frozen=frozen, planned=p.cref)
         v, tot = p.v, p.tot
         if cm.model_mismatch:
             corr = [float(c) for c in cm.correction_n]
@@ -401,6 +511,12 @@ class Monitor:
         if self.gyro_bias is not None and any(self._bias_now):
             bx, by, bz = self._bias_now
             reasons.append(f"gyro bias ({bx:+.3f}, {by:+.3f}, {bz:+.3f}) rad/s removed")
+        if self._vib_active:
+            assert self.vibration is not None
+            reasons.append(
+                f"accelerometer vibration (RMS {self.vibration.rms_m_s2:.1f} m/s^2 above "
+                f"{self.vibration.config.cutoff_hz:g} Hz): virtual sensor without it, corner "
+                f"threshold x{self.vibration.config.corner_sigma_scale:g}")
         if any(self._tilt_now):
             reasons.append("IMU mounting tilt (roll {:+.1f}, pitch {:+.1f}) deg removed".format(
                 *self._tilt_now))
@@ -445,6 +561,11 @@ class Monitor:
         """
         if not isinstance(row, Mapping):
             row = {}
+        k = self._kernel()
+        if k is not None:
+            from grfguard.kernels.monitor import update_dict
+
+            return update_dict(self, k, row)
         t_raw = _f(row, TIME)
         clean, reason = self.inputs.clean_row(row)
         if self.gyro_bias is not None:
@@ -457,7 +578,17 @@ class Monitor:
                 self._vfs_resync()
             else:
                 self.vfs.reset()
+            if self.vfs_quiet is not None:
+                self.vfs_quiet.reset()
         vout = self._vfs_row(clean)
+        if self.vibration is not None:
+            try:
+                vq = self.vfs_quiet.update(clean)
+            except Exception:  # noqa: BLE001 - a bad sample must never raise
+                vq = {}
+            if self.vibration.update(_f(clean, IMU_ACC[0]), _f(clean, IMU_ACC[1])):
+                vout = vq
+                self._vibration_on()
         src = vout if self.vfs is not None else clean
         v = [_f(src, vfs_col(s)) for s in SENSOR_NAMES]
         tot = [_f(src, c) for c in VFS_TOTAL_COLUMNS]
@@ -474,6 +605,65 @@ class Monitor:
         out: dict[str, Any] = dict(vout)
         out.update(res)
         return out
+
+    @property
+    def input_columns(self) -> tuple[str, ...]:
+        """Layout of the input row of :meth:`update_array`: ``time``, the eight
+        ``force_<s>``, then the virtual sensor's inputs (joint angles, IMU, planned
+        contact: :data:`grfguard.kernels.vfs.IN_COLUMNS`) or, for a monitor without a
+        virtual sensor, the precomputed ``contact_ref_*``, ``vfs_*``, ``vfs_total_*``,
+        ``contact_est_*``, ``vfs_valid`` (:mod:`grfguard.kernels.monitor`)."""
+        from grfguard.kernels.monitor import input_columns
+
+        return input_columns(self.vfs is not None)
+
+    @property
+    def output_columns(self) -> tuple[str, ...]:
+        """Layout of the output row of :meth:`update_array`: the 22 virtual-sensor outputs
+        (with a virtual sensor inside), then ``flag_<s>`` (0/1), ``kind_<s>`` (index into
+        :data:`grfguard.kernels.detect.KIND_NAMES`), ``eta_<s>`` [N], ``recovered_<s>``
+        [N] for the eight sensors, and ``system_state`` (index into
+        :data:`grfguard.guard.SYSTEM_STATES`)."""
+        from grfguard.kernels.monitor import output_columns
+
+        return output_columns(self.vfs is not None)
+
+    def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+        """One sample as arrays (the fast streaming call): ``x`` in
+        :attr:`input_columns` order -> ``y`` in :attr:`output_columns` order (written into
+        ``y`` when given, a contiguous float64 array). Same numbers as :meth:`update`
+        (without the ``system_reason`` text); never raises on a bad sample. One compiled
+        call when the monitor runs compiled (:meth:`compiled_reason`), else through
+        :meth:`update`.
+
+        Raises:
+            LogFormatError: If ``x`` or ``y`` has the wrong length.
+        """
+        k = self._kernel()
+        n_in = len(self.input_columns)
+        n_out = len(self.output_columns)
+        if y is None:
+            y = np.empty(n_out)
+        if k is not None and type(x) is np.ndarray and x.shape == (n_in,) and \
+                x.dtype == np.float64 and x.flags.c_contiguous and y.shape == (n_out,) and \
+                y.dtype == np.float64 and y.flags.c_contiguous:
+            return k.step(x, y)
+        x = np.ascontiguousarray(x, dtype=float).ravel()
+        if x.shape != (n_in,) or y.shape != (n_out,):
+            raise LogFormatError(
+                f"Monitor.update_array takes an input row of {n_in} values in "
+                f"Monitor.input_columns order and an output row of {n_out}; got shapes "
+                f"{x.shape} and {y.shape}")
+        if k is not None:
+            yy = np.empty(n_out)
+            k.step(x, yy)
+            y[:] = yy
+            return y
+        from grfguard.kernels.monitor import dict_to_row
+
+        y[:] = dict_to_row(self.update(dict(zip(self.input_columns, x.tolist(),
+                                                strict=True))), self.output_columns)
+        return y
 
     def _unbias_row(self, clean: dict[str, Any]) -> None:
         """Subtract the learned gyro bias from one cleaned row (in place)."""
@@ -607,6 +797,15 @@ class Monitor:
                 f"Monitor.run: the log lacks column(s) {missing}; see grfguard.io.schema"
             )
         self.reset()
+        if self.vfs is not None:
+            self.vfs.check_columns(log.columns)
+        k = self._kernel(*_has_gyro_ref(log))
+        if k is not None:
+            from grfguard.kernels.monitor import run_frame
+
+            out = run_frame(self, k, log)
+            out.attrs = {**log.attrs, "monitor": self.describe()}
+            return out
         attrs = log.attrs
         # the stages read columns only: without the metadata pandas would otherwise
         # deep-copy on every column access (a large cost on long logs)
@@ -632,6 +831,17 @@ class Monitor:
                 vdf = self._vfs_batch(clean, resets)
             else:
                 vdf = self._vfs_reset_segments(clean, resets)
+        k_vib = n
+        if self.vibration is not None and vdf is not None:
+            k_vib = self.vibration.run(
+                pd.to_numeric(clean[IMU_ACC[0]], errors="coerce").to_numpy(float),
+                pd.to_numeric(clean[IMU_ACC[1]], errors="coerce").to_numpy(float))
+            if k_vib < n:
+                vq = self.vfs_quiet.run(clean)
+                self.vfs_quiet.reset()
+                vdf = vdf.copy()
+                qcols = [c for c in vdf.columns if c in vq.columns]
+                vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
         prep = self._prepare_frame(log, clean, vdf if vdf is not None else clean, times,
                                    reasons, resets)
         if self.config.method == "paper":
@@ -644,6 +854,8 @@ class Monitor:
                     self._bias_now = tuple(float(q) for q in self._bias_rows[k])
                 if self._tilt_rows is not None:
                     self._tilt_now = tuple(float(q) for q in self._tilt_rows[k])
+                if k == k_vib:
+                    self._vibration_on()
                 rows.append(self._detect(prep.sample(k)))
             res_df = pd.DataFrame(rows) if rows else pd.DataFrame()
             cols = {c: res_df[c].to_numpy() for c in res_df.columns}

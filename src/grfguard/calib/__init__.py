@@ -4,9 +4,18 @@ from __future__ import annotations
 
 from grfguard.calib.selfcal import (
     ModelCorrections,
+    accelerometer_vibration_rms,
     apply_corrections,
+    corrected_config,
     estimate_corrections,
     robot_of,
 )
 
-__all__ = ["ModelCorrections", "apply_corrections", "estimate_corrections", "robot_of"]
+__all__ = [
+    "ModelCorrections",
+    "accelerometer_vibration_rms",
+    "apply_corrections",
+    "corrected_config",
+    "estimate_corrections",
+    "robot_of",
+]

@@ -58,6 +58,8 @@ __all__ = [
     "ModelCorrections",
     "estimate_corrections",
     "apply_corrections",
+    "corrected_config",
+    "accelerometer_vibration_rms",
     "robot_of",
 ]
 
@@ -69,6 +71,15 @@ GAIN_RIDGE = 0.01
 GAIN_RIDGE_QUIET = 1e-4
 #: Low-pass cut-off of the whole-body balance fit of the gains in [Hz].
 GAIN_FIT_CUTOFF_HZ = 10.0
+#: The same with a vibrating accelerometer (leg odometry instead; accurate below ~2 Hz).
+GAIN_FIT_CUTOFF_VIBRATING_HZ = 2.0
+#: Rocking of a loaded sole about the flat ground (contact compliance) [rad].
+FLAT_SOLE_SIGMA_RAD = math.radians(0.2)
+#: Height difference of two loaded soles on flat ground (contact compliance) [m].
+FLAT_HEIGHT_SIGMA_M = 0.5e-3
+#: Prior (1 sigma) of each encoder offset [rad] (ASSUMED: a calibrated robot's encoders
+#: are within a degree).
+ENCODER_PRIOR_RAD = math.radians(0.5)
 #: Accelerometer RMS above 10 Hz [m/s^2] up to which it is used in the gain fit.
 ACC_QUIET_RMS = 0.2
 
@@ -103,6 +114,15 @@ class ModelCorrections:
         load_cell_zero_n: Zero of each load cell in [N].
         sigma: 1-sigma uncertainty of each entry (same keys, flattened).
         measured_mass: True when ``mass_kg`` is a given measured mass.
+        acc_vibration_rms_m_s2: Vertical accelerometer RMS above 10 Hz seen in the
+            calibration data [m/s^2] (impact vibration; white noise alone is ~0.05).
+        use_accelerometer: Whether the virtual sensor should fuse the accelerometer
+            (False when it vibrates above ``ACC_QUIET_RMS``: its shaking would reach the
+            per-corner forces; leg odometry alone is then the better estimate).
+        encoder_offset_deg: Offset of each joint encoder (joint name -> [deg]; the
+            reading minus the true angle). Individually they are poorly determined; what
+            the fit fixes is their effect on each sole's tilt, which is what the virtual
+            sensor's corner split needs.
     """
 
     mass_kg: float | None = None
@@ -119,6 +139,11 @@ class ModelCorrections:
     )
     sigma: dict[str, float] = field(default_factory=dict, compare=False)
     measured_mass: bool = False
+    acc_vibration_rms_m_s2: float = 0.0
+    use_accelerometer: bool = True
+    encoder_offset_deg: dict[str, float] = field(
+        default_factory=lambda: {j: 0.0 for j in JOINT_NAMES}
+    )
 
     def __post_init__(self) -> None:
         for name in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
@@ -126,9 +151,11 @@ class ModelCorrections:
             if len(v) != 3 or not all(math.isfinite(x) for x in v):
                 raise ConfigError(f"model_corrections.{name} = {v} must be 3 finite numbers")
             object.__setattr__(self, name, v)
-        for name in ("load_cell_gain", "load_cell_zero_n"):
+        for name, keys in (("load_cell_gain", SENSOR_NAMES),
+                           ("load_cell_zero_n", SENSOR_NAMES),
+                           ("encoder_offset_deg", JOINT_NAMES)):
             d = getattr(self, name)
-            missing = [s for s in SENSOR_NAMES if s not in d]
+            missing = [s for s in keys if s not in d]
             if missing:
                 raise ConfigError(f"model_corrections.{name} lacks sensor(s) {missing}")
         bad = {s: g for s, g in self.load_cell_gain.items() if not 0.2 < float(g) < 5.0}
@@ -178,7 +205,7 @@ class ModelCorrections:
                 lines.append(f"{k} = [{', '.join(repr(float(x)) for x in v)}]")
             else:
                 lines.append(f"{k} = {float(v)!r}")
-        for k in ("load_cell_gain", "load_cell_zero_n", "sigma"):
+        for k in ("load_cell_gain", "load_cell_zero_n", "encoder_offset_deg", "sigma"):
             lines.append(f"[model_corrections.{k}]")
             lines += [f'"{s}" = {float(v)!r}' for s, v in d[k].items()]
         return "\n".join(lines) + "\n"
@@ -205,7 +232,11 @@ class ModelCorrections:
             f"mass {m}, trunk CoM ({100 * self.trunk_com_x_m:+.1f}, "
             f"{100 * self.trunk_com_y_m:+.1f}) cm, IMU mount roll {r[0]:+.2f} deg pitch "
             f"{r[1]:+.2f} deg, gyro bias {np.round(self.gyro_bias_rad_s, 4).tolist()} rad/s, "
-            f"gains {g.min():.3f}-{g.max():.3f}, zeros {z.min():+.1f}..{z.max():+.1f} N"
+            f"gains {g.min():.3f}-{g.max():.3f}, zeros {z.min():+.1f}..{z.max():+.1f} N, "
+            f"encoder offsets up to {max(map(abs, self.encoder_offset_deg.values())):.2f} "
+            "deg, "
+            f"accelerometer vibration {self.acc_vibration_rms_m_s2:.2f} m/s^2 RMS > 10 Hz"
+            + ("" if self.use_accelerometer else " (left out of the virtual sensor)")
         )
 
 
@@ -313,30 +344,43 @@ def estimate_corrections(
     b_g = _fit_gyro_bias(data, sigma)
     b_a = _fit_acc_bias(data, robot.gravity, sigma)
     R_BI = _fit_imu_mount(data, robot, zero, sigma)
-    rpy = _R_to_rpy(R_BI)
+    R_BI, enc = _fit_mount_and_encoders(data, robot, zero, R_BI, sigma)
+    data = [dataclasses.replace(d, q=d.q - enc) for d in data]
+    vib = max(accelerometer_vibration_rms(d.acc, d.dt) for d in data)
+
+    def build(mass: float, gains: np.ndarray, d_com: np.ndarray) -> ModelCorrections:
+        return ModelCorrections(
+            mass_kg=mass,
+            trunk_com_x_m=float(robot.trunk_com_x + d_com[0]),
+            trunk_com_y_m=float(robot.trunk_com_y + d_com[1]),
+            imu_mount_rpy_deg=tuple(float(v) for v in np.degrees(_R_to_rpy(R_BI))),
+            gyro_bias_rad_s=tuple(float(v) for v in b_g),
+            acc_bias_m_s2=tuple(float(v) for v in b_a),
+            load_cell_gain={s: float(v) for s, v in zip(SENSOR_NAMES, gains, strict=True)},
+            load_cell_zero_n={s: float(v) for s, v in zip(SENSOR_NAMES, zero, strict=True)},
+            sigma=sigma,
+            measured_mass=measured_mass_kg is not None,
+            acc_vibration_rms_m_s2=vib,
+            use_accelerometer=vib < ACC_QUIET_RMS,
+            encoder_offset_deg={j: float(math.degrees(v))
+                                for j, v in zip(JOINT_NAMES, enc, strict=True)},
+        )
 
     # gains/mass and trunk CoM twice: the second pass computes the relative CoM motion
-    # with the corrected trunk CoM
-    rob_fit = robot
-    for _ in range(2):
-        mass, gains = _fit_gains(data, rob_fit, zero, b_a, R_BI, measured_mass_kg, sigma)
-        d_com = _fit_trunk_com(data, robot, mass, gains, zero, R_BI, sigma)
-        rob_fit = dataclasses.replace(
+    # with the corrected trunk CoM; a vibrating accelerometer: a third pass with the
+    # vertical acceleration of the leg odometry on the corrected logs
+    odo = None
+    mass, gains, d_com = robot.mass, np.ones(8), np.zeros(2)
+    for k in range(2 if vib < ACC_QUIET_RMS else 3):
+        if k == 2:
+            first = build(mass, gains, d_com)
+            odo = [_odometry_vertical_acc(f, first) for f in frames]
+        rob_fit = robot if k == 0 else dataclasses.replace(
             robot, trunk_com_x=robot.trunk_com_x + float(d_com[0]),
-            trunk_com_y=robot.trunk_com_y + float(d_com[1]),
-        )
-    return ModelCorrections(
-        mass_kg=mass,
-        trunk_com_x_m=float(robot.trunk_com_x + d_com[0]),
-        trunk_com_y_m=float(robot.trunk_com_y + d_com[1]),
-        imu_mount_rpy_deg=tuple(float(v) for v in np.degrees(rpy)),
-        gyro_bias_rad_s=tuple(float(v) for v in b_g),
-        acc_bias_m_s2=tuple(float(v) for v in b_a),
-        load_cell_gain={s: float(v) for s, v in zip(SENSOR_NAMES, gains, strict=True)},
-        load_cell_zero_n={s: float(v) for s, v in zip(SENSOR_NAMES, zero, strict=True)},
-        sigma=sigma,
-        measured_mass=measured_mass_kg is not None,
-    )
+            trunk_com_y=robot.trunk_com_y + float(d_com[1]))
+        mass, gains = _fit_gains(data, rob_fit, zero, b_a, R_BI, measured_mass_kg, sigma, odo)
+        d_com = _fit_trunk_com(data, robot, mass, gains, zero, R_BI, sigma)
+    return build(mass, gains, d_com)
 
 
 def _fit_zeros(data: list, sigma: dict[str, float]) -> np.ndarray:
@@ -425,27 +469,121 @@ def _fit_imu_mount(data: list, robot: RobotConfig, zero: np.ndarray,
     return R_BI
 
 
+def _double_support_samples(data: list, robot: RobotConfig, zero: np.ndarray,
+                            every_s: float = 0.02) -> list[tuple[_LogData, np.ndarray]]:
+    """Per log, the indices of double-support samples with both feet loaded (> 15 % of
+    the weight each), away from contact changes, every ``every_s`` [s]."""
+    out = []
+    for d in data:
+        fz = d.f - zero
+        load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
+        m = (
+            (d.cref.min(axis=1) > 0.5)
+            & _away_from_edges(d.cref, d.dt)
+            & (load.min(axis=1) > 0.15 * robot.weight)
+        )
+        idx = np.flatnonzero(m)[:: max(1, int(round(every_s / d.dt)))]
+        if len(idx):
+            out.append((d, idx))
+    return out
+
+
+def _flat_feet_residuals(params: np.ndarray, samples: list, robot: RobotConfig,
+                         R0: np.ndarray) -> np.ndarray:
+    """Residuals of the flat-ground constraints in double support for ``params`` =
+    (mount roll, mount pitch [rad] on top of ``R0``, 12 encoder offsets [rad]): both sole
+    normals vertical (world x, y components, over ``FLAT_SOLE_SIGMA_RAD``) and both soles
+    at the same height (over ``FLAT_HEIGHT_SIGMA_M``), then the offsets over
+    ``ENCODER_PRIOR_RAD`` (their prior)."""
+    R_BI = R0 @ _rpy_to_R(np.array([params[0], params[1], 0.0]))
+    off = params[2:]
+    res = []
+    for d, idx in samples:
+        R_WB = quat_to_rotation(d.quat[idx]) @ R_BI.T
+        q = d.q[idx] - off
+        pr, Rr = leg_fk(robot, "r", np.zeros(3), R_WB, q[:, :6])
+        pl, Rl = leg_fk(robot, "l", np.zeros(3), R_WB, q[:, 6:])
+        res += [Rr[:, :2, 2].ravel() / FLAT_SOLE_SIGMA_RAD,
+                Rl[:, :2, 2].ravel() / FLAT_SOLE_SIGMA_RAD,
+                (pl[:, 2] - pr[:, 2]) / FLAT_HEIGHT_SIGMA_M]
+    res.append(off / ENCODER_PRIOR_RAD)
+    return np.concatenate(res)
+
+
+def _fit_mount_and_encoders(data: list, robot: RobotConfig, zero: np.ndarray,
+                            R0: np.ndarray, sigma: dict[str, float]
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 4b: IMU mounting ``R_BI`` (3, 3) and encoder offsets [rad] (12,) jointly.
+
+    The sole normals alone fix only the mounting plus the legs' summed joint offsets (an
+    encoder offset tilts the kinematic sole like a mounting error does); that both soles
+    stand at the same height on flat ground (mm over the 0.2 m between the feet) separates
+    them. Gauss-Newton from ``R0`` with a prior of ``ENCODER_PRIOR_RAD`` on each offset.
+    """
+    samples = _double_support_samples(data, robot, zero)
+    p = np.zeros(14)
+    for _ in range(3):
+        r0 = _flat_feet_residuals(p, samples, robot, R0)
+        J = np.empty((len(r0), 14))
+        for k in range(14):
+            dp = np.zeros(14)
+            dp[k] = 1e-6
+            J[:, k] = (_flat_feet_residuals(p + dp, samples, robot, R0) - r0) / 1e-6
+        step, *_ = np.linalg.lstsq(J, -r0, rcond=None)
+        p = p + step
+        if np.max(np.abs(step)) < 1e-8:
+            break
+    cov = np.linalg.inv(J.T @ J)
+    sigma["imu_mount_deg"] = float(np.degrees(math.sqrt(max(cov[0, 0], cov[1, 1]))))
+    sigma["encoder_offset_deg"] = float(np.degrees(math.sqrt(np.max(np.diag(cov)[2:]))))
+    return R0 @ _rpy_to_R(np.array([p[0], p[1], 0.0])), p[2:]
+
+
+def accelerometer_vibration_rms(acc: np.ndarray, dt: float) -> float:
+    """RMS of the vertical (IMU z) specific force above 10 Hz [m/s^2] of (T, 3) ``acc``
+    (the shaking at the foot impacts; a quiet IMU reads only its white noise there)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    nyq = 0.5 / dt
+    hf = sosfiltfilt(butter(4, min(10.0 / nyq, 0.9), "highpass", output="sos"), acc[:, 2])
+    return float(np.sqrt(np.mean(hf**2)))
+
+
+def _odometry_vertical_acc(log: pd.DataFrame, corr: ModelCorrections | None) -> np.ndarray:
+    """``g + a_z`` [m/s^2] (T,) of the CoM from the virtual sensor's leg odometry (the
+    accelerometer unused): its total vertical force over the model mass, on ``log`` with
+    the first-pass corrections applied."""
+    from grfguard.estimate.vfs import VFSConfig, VirtualForceSensor
+
+    lc = apply_corrections(log, corr)
+    out = VirtualForceSensor.for_log(lc, VFSConfig(use_accelerometer=False)).run(lc)
+    return (out["vfs_total_r"].to_numpy(float) + out["vfs_total_l"].to_numpy(float)) / (
+        robot_of(lc).mass
+    )
+
+
 def _gain_fit_rows(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.ndarray,
-                   R_BI: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+                   R_BI: np.ndarray, odo: list | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Rows ``A`` (loads [N]) and ``y`` (vertical CoM acceleration + g [m/s^2]) of the
     whole-body balance, and whether the accelerometer was quiet.
 
-    The vertical CoM acceleration is the trunk's (accelerometer, world z) plus the CoM's
-    relative to the trunk (kinematics); both sides low-passed at GAIN_FIT_CUTOFF_HZ. An
-    accelerometer that shakes at the impacts (RMS above 10 Hz > ACC_QUIET_RMS) would bias
-    the fit: then a_z = 0 over 0.1 s.
+    Quiet accelerometer: the vertical CoM acceleration is the trunk's (accelerometer,
+    world z) plus the CoM's relative to the trunk (kinematics); both sides low-passed at
+    GAIN_FIT_CUTOFF_HZ. An accelerometer that shakes at the impacts (RMS above 10 Hz >
+    ACC_QUIET_RMS) would bias and swamp the fit: then ``y`` is the virtual sensor's leg
+    odometry (``odo``, :func:`_odometry_vertical_acc`) and both sides are low-passed at
+    GAIN_FIT_CUTOFF_VIBRATING_HZ, where the odometry is accurate; without ``odo``,
+    ``a_z = 0`` over 0.1 s blocks (first pass).
     """
     from scipy.signal import butter, savgol_filter, sosfiltfilt
 
     g = rob_fit.gravity
     A, y = [], []
-    quiet = True
-    for d in data:
+    quiet = all(accelerometer_vibration_rms(d.acc, d.dt) < ACC_QUIET_RMS for d in data)
+    for k, d in enumerate(data):
         nyq = 0.5 / d.dt
-        hf = sosfiltfilt(butter(4, min(10.0 / nyq, 0.9), "highpass", output="sos"), d.acc[:, 2])
-        quiet &= float(np.sqrt(np.mean(hf**2))) < ACC_QUIET_RMS
-    for d in data:
-        nyq = 0.5 / d.dt
+        step = max(1, int(round(0.01 / d.dt)))
         if quiet:
             acc_B = (d.acc - b_a) @ R_BI.T  # R_BI (acc - b)
             R_WB = quat_to_rotation(d.quat) @ R_BI.T
@@ -454,9 +592,13 @@ def _gain_fit_rows(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.n
             win = 2 * int(round(0.025 / d.dt)) + 1
             a_rel = savgol_filter(rel, win, 3, deriv=2, delta=d.dt)
             sos = butter(4, min(GAIN_FIT_CUTOFF_HZ / nyq, 0.9), output="sos")
-            step = max(1, int(round(0.01 / d.dt)))
             A.append(sosfiltfilt(sos, d.f - zero, axis=0)[::step])
             y.append(sosfiltfilt(sos, g + a_trunk + a_rel)[::step])
+        elif odo is not None:
+            sos = butter(4, min(GAIN_FIT_CUTOFF_VIBRATING_HZ / nyq, 0.9), output="sos")
+            cut = int(round(1.0 / d.dt))  # the filters' start-up
+            A.append(sosfiltfilt(sos, d.f - zero, axis=0)[cut:-cut:step])
+            y.append(sosfiltfilt(sos, odo[k] * g / rob_fit.gravity)[cut:-cut:step])
         else:
             n = max(1, int(round(0.1 / d.dt)))
             A.append(_blocks(d.f - zero, n))
@@ -466,9 +608,9 @@ def _gain_fit_rows(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.n
 
 def _fit_gains(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.ndarray,
                R_BI: np.ndarray, measured_mass_kg: float | None,
-               sigma: dict[str, float]) -> tuple[float, np.ndarray]:
+               sigma: dict[str, float], odo: list | None = None) -> tuple[float, np.ndarray]:
     """Stage 5: mass [kg] and load-cell gains (8,) from the whole-body balance."""
-    A_all, y_all, quiet = _gain_fit_rows(data, rob_fit, zero, b_a, R_BI)
+    A_all, y_all, quiet = _gain_fit_rows(data, rob_fit, zero, b_a, R_BI, odo)
     w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
     # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
     reg = (GAIN_RIDGE_QUIET if quiet else GAIN_RIDGE) * float((A_all**2).sum()) / 8.0
@@ -537,9 +679,9 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
 
     IMU columns are rotated into the model's trunk frame after removing the biases
     (``acc_B = R_BI (acc - b_a)``, ``gyro_B = R_BI (gyro - b_g)``, ``R_WB = R_WI R_BI^T``),
-    forces become ``(f - z_i) / k_i``, and ``attrs["robot"]`` gets the corrected mass and
-    trunk CoM. ``attrs["model_corrections"]`` records what was applied. None returns
-    ``log`` unchanged.
+    forces become ``(f - z_i) / k_i``, joint angles ``q - offset``, and ``attrs["robot"]``
+    gets the corrected mass and trunk CoM. ``attrs["model_corrections"]`` records what was
+    applied. None returns ``log`` unchanged.
     """
     if corr is None:
         return log
@@ -559,6 +701,10 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
             qc = rotation_to_quat(quat_to_rotation(q[ok]) @ R_BI.T)
             qn[ok] = qc * np.where(qc[:, :1] < 0, -1.0, 1.0)
         out[list(IMU_QUAT)] = qn
+    for j, off in corr.encoder_offset_deg.items():
+        c = f"q_{j}"
+        if c in out.columns and off != 0.0:
+            out[c] = out[c].to_numpy(float) - math.radians(off)
     for s in SENSOR_NAMES:
         c = f"force_{s}"
         if c in out.columns:
@@ -573,3 +719,21 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
         "model_corrections": corr.to_dict(),
     }
     return out
+
+
+def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
+    """``config`` (a :class:`~grfguard.detect.MonitorConfig`, None for the default) with
+    the virtual sensor settings the corrections call for: the accelerometer left out of
+    the multibody estimator's fusion when it vibrated in the calibration data
+    (``corr.use_accelerometer``).
+    Unchanged when ``corr`` is None or the accelerometer was quiet."""
+    from grfguard.detect import MonitorConfig
+    from grfguard.estimate.vfs import VFSConfig
+
+    cfg = config if config is not None else MonitorConfig()
+    if corr is None or corr.use_accelerometer:
+        return cfg
+    vfs = cfg.vfs if cfg.vfs is not None else VFSConfig()
+    if vfs.com_method != "multibody":  # the paper's LIPM filter: nothing to switch
+        return cfg
+    return cfg.replace(vfs=dataclasses.replace(vfs, use_accelerometer=False))

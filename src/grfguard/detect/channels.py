@@ -5,7 +5,7 @@ two soles (its tests use the foot balance across four corners). A six-axis force
 sensor at each ankle gives twelve channels ``ft_<r|l>_<fx, fy, fz, tx, ty, tz>``, each
 with its own virtual estimate ``vfs_<r|l>_<axis>``
 (:func:`grfguard.estimate.described.with_described_vfs`). Each channel is watched on
-its own (batch, zero look-ahead except the planned contact timeline):
+its own (causal: no look-ahead):
 
 1. **residual** ``r = x - v`` (reading minus virtual channel), normalised by the
    channel's fault-free scale ``sigma`` (:func:`calibrate_channels`), tested where the
@@ -22,9 +22,18 @@ its own (batch, zero look-ahead except the planned contact timeline):
    one-parameter models, offset ``b``, drift ``a (t - t0)``, gain ``(g - 1) v``; the
    least squared error wins (re-fitted at every sample while flagged);
 5. **recovery**: ``recovered = x - fault`` for offset, drift and gain (the fitted fault
-   taken out: valid in double support too), the virtual channel for frozen.
+   taken out: valid in double support too), the virtual channel for frozen;
+6. **clearing**: the CUSUM keeps running on the raw residual while flagged; the flag
+   clears (kind, fits and onset forgotten) after ``clear_s`` without alarm once
+   ``clear_valid_fraction`` of ``clear_s`` in valid samples were quiet
+   (``|r| / sigma < kappa``); a frozen flag clears after ``clear_s`` of varying
+   readings, as the corner detector's flags do.
 
-A flag stays raised to the end of the log (no clearing).
+:meth:`ChannelMonitor.update` takes one sample (the virtual channels computed ahead, e.g.
+by the batch :func:`~grfguard.estimate.described.with_described_vfs`), and
+:meth:`ChannelMonitor.run` is the same step over a log. The test gate is causal
+(:class:`ContactPhases`: the end of a phase is predicted from the last phase of the same
+kind).
 """
 
 from __future__ import annotations
@@ -39,7 +48,10 @@ import pandas as pd
 from grfguard.detect.blocks import cusum_step, excursion_peaks, robust_scale, threshold_for_rate
 from grfguard.errors import ConfigError, LogFormatError
 
-__all__ = ["ChannelConfig", "ChannelMonitor", "calibrate_channels", "channel_valid_mask"]
+__all__ = [
+    "ChannelConfig", "ChannelMonitor", "ContactPhases", "calibrate_channels",
+    "channel_valid_mask",
+]
 
 _KINDS = ("offset", "drift", "gain")
 
@@ -55,7 +67,12 @@ class ChannelConfig:
         h: CUSUM threshold [σ·samples] (one for every channel).
         kappa: CUSUM allowance [σ].
         guard_s: Tests pause this long around every planned contact change [s].
-        const_s: A loaded channel reading the same value this long is frozen [s].
+        const_s: A loaded channel reading the same value this long is frozen [s] (at
+            least 3 identical readings).
+        clear_s: A flag clears after this long without alarm [s], once ...
+        clear_valid_fraction: ... this fraction of ``clear_s`` (in samples) were valid
+            and quiet since the flag (residual within ``kappa``; frozen: the reading
+            varied) [-].
         source: Where the numbers come from.
     """
 
@@ -64,6 +81,8 @@ class ChannelConfig:
     kappa: float = 2.0
     guard_s: float = 0.15
     const_s: float = 0.03
+    clear_s: float = 1.0
+    clear_valid_fraction: float = 0.5
     source: str = "builtin"
 
     def __post_init__(self) -> None:
@@ -71,14 +90,18 @@ class ChannelConfig:
                if len(v) != 2 or not all(q > 0 and math.isfinite(q) for q in v)}
         if bad:
             raise ConfigError(f"channel sigma must be finite and > 0, got {bad}")
-        if not (self.h > 0 and self.kappa >= 0 and self.guard_s >= 0 and self.const_s > 0):
-            raise ConfigError("channel h > 0, kappa >= 0, guard_s >= 0, const_s > 0 [s] needed")
+        if not (self.h > 0 and self.kappa >= 0 and self.guard_s >= 0 and self.const_s > 0
+                and self.clear_s > 0 and 0 <= self.clear_valid_fraction <= 1):
+            raise ConfigError("channel h > 0, kappa >= 0, guard_s >= 0, const_s > 0 [s], "
+                              "clear_s > 0 [s], 0 <= clear_valid_fraction <= 1 needed")
 
 
     def to_toml(self) -> str:
         """TOML text of a ``[channels]`` table and a ``[channels.sigma]`` table."""
         lines = ["[channels]", f"h = {self.h!r}", f"kappa = {self.kappa!r}",
                  f"guard_s = {self.guard_s!r}", f"const_s = {self.const_s!r}",
+                 f"clear_s = {self.clear_s!r}",
+                 f"clear_valid_fraction = {self.clear_valid_fraction!r}",
                  f"source = {self.source!r}".replace("'", '"'), "", "[channels.sigma]"]
         lines += [f"{k} = [{v[0]!r}, {v[1]!r}]" for k, v in self.sigma.items()]
         return "\n".join(lines) + "\n"
@@ -106,40 +129,73 @@ def _side(ch: str) -> int:
     return 0 if ch.startswith("ft_r_") else 1
 
 
-def channel_valid_mask(log: pd.DataFrame, guard_s: float) -> np.ndarray:
-    """(T, 2) bool: per foot (right, left), single support or swing, ``guard_s`` away from
-    every planned contact change (``contact_est_<side>``, else ``contact_ref_<side>``)."""
-    t = log["time"].to_numpy(float)
-    cols = []
+class ContactPhases:
+    """Causal test gate of the channel monitor from the planned contact (one sample per
+    :meth:`step`).
+
+    The tests are valid while the robot is not in double support, ``guard_s`` after the
+    last contact change and ``guard_s`` before the expected next one; the expected end of
+    a phase is its start plus the last duration of the same phase (the same feet on the
+    ground), else of its mirror (the other foot's single support). Before such a phase
+    has been seen whole, no test is valid (the first step of a walk).
+
+    Args:
+        guard_s: Distance kept from contact changes [s].
+    """
+
+    def __init__(self, guard_s: float) -> None:
+        self.guard_s = float(guard_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """No contact history."""
+        self._prev: tuple[bool, bool] | None = None
+        self._start = math.nan  # start time of the current phase (NaN: before the log)
+        self._last: dict[tuple[bool, bool], float] = {}
+
+    def step(self, t: float, right: bool, left: bool) -> bool:
+        """Advance to time ``t`` [s] with the planned contact of both feet; returns
+        whether the tests are valid at ``t``."""
+        state = (bool(right), bool(left))
+        if self._prev is None:
+            self._prev = state
+        elif state != self._prev:
+            if math.isfinite(self._start):
+                self._last[self._prev] = t - self._start
+            self._start = t
+            self._prev = state
+        if state == (True, True) or not math.isfinite(self._start):
+            return False
+        exp = self._last.get(state, self._last.get(state[::-1], math.nan))
+        since = t - self._start
+        return math.isfinite(exp) and self.guard_s <= since <= exp - self.guard_s
+
+
+def _contact_columns(log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Planned stance per foot (right, left): ``contact_est``, else ``contact_ref``."""
+    out = []
     for s in ("r", "l"):
         c = f"contact_est_{s}" if f"contact_est_{s}" in log else f"contact_ref_{s}"
         if c not in log:
             raise LogFormatError(f"channel monitor: the log has no contact_est_{s} or "
                                  f"contact_ref_{s} column (0/1 planned contact)")
-        cols.append(log[c].to_numpy(float) > 0.5)
-    c = np.column_stack(cols)
-    double = c[:, 0] & c[:, 1]
-    change = np.zeros(t.size, bool)
-    change[1:] = np.any(c[1:] != c[:-1], axis=1)
-    tc = t[change]
-    if tc.size:
-        j = np.searchsorted(tc, t)
-        prev = np.where(j > 0, t - tc[np.maximum(j - 1, 0)], np.inf)
-        nxt = np.where(j < tc.size, tc[np.minimum(j, tc.size - 1)] - t, np.inf)
-        near = (prev < guard_s) | (nxt < guard_s)
-    else:
-        near = np.zeros(t.size, bool)
-    ok = ~double & ~near
+        out.append(log[c].to_numpy(float) > 0.5)
+    return out[0], out[1]
+
+
+def channel_valid_mask(log: pd.DataFrame, guard_s: float) -> np.ndarray:
+    """(T, 2) bool: per foot (right, left), where the channel tests are valid
+    (:class:`ContactPhases` over the log: single support or swing, ``guard_s`` after the
+    last planned contact change and before the expected next one)."""
+    t = log["time"].to_numpy(float)
+    cr, cl = _contact_columns(log)
+    gate = ContactPhases(guard_s)
+    ok = np.fromiter((gate.step(float(t[k]), bool(cr[k]), bool(cl[k])) for k in range(t.size)),
+                     bool, t.size)
     return np.column_stack([ok, ok])
 
 
-def _loaded(log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Planned stance per foot (right, left): ``contact_est``, else ``contact_ref``."""
-    out = []
-    for s in ("r", "l"):
-        c = f"contact_est_{s}" if f"contact_est_{s}" in log else f"contact_ref_{s}"
-        out.append(log[c].to_numpy(float) > 0.5)
-    return out[0], out[1]
+_loaded = _contact_columns
 
 
 def _channels(log: pd.DataFrame) -> list[str]:
@@ -199,21 +255,73 @@ def calibrate_channels(logs: list[pd.DataFrame], rate_per_hour: float = 0.1,
                    source=f"calibrated on {len(logs)} fault-free log(s), {hours * 60:.1f} min")
 
 
+class _Channel:
+    """Streaming state of one channel (tests, fits, flag)."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.gp = self.gn = 0.0
+        self.last_x = math.nan
+        self.run = 0          # identical readings so far (1 = a new value)
+        self.excursion: list[tuple[float, float, float]] = []  # (t, r, v) since the sum left 0
+        self.clear_flag()
+
+    def clear_flag(self) -> None:
+        self.flag = False
+        self.frozen = False
+        self.onset_s = math.nan
+        self.last_alarm_s = math.nan
+        self.quiet = 0
+        self.sums = [0.0] * 6  # Σr, Σ1, Στr, Σττ, Σvr, Σvv on valid samples since the onset
+        self.srr = 0.0
+
+    def add(self, t: float, r: float, v: float) -> None:
+        tau = t - self.onset_s
+        s = self.sums
+        s[0] += r
+        s[1] += 1.0
+        s[2] += tau * r
+        s[3] += tau * tau
+        s[4] += v * r
+        s[5] += v * v
+        self.srr += r * r
+
+
 class ChannelMonitor:
-    """Per-channel detection, kind and recovery over a log (module docstring).
+    """Per-channel detection, kind, recovery and flag clearing (module docstring), batch
+    (:meth:`run`) or one sample at a time (:meth:`update`); :meth:`run` is :meth:`update`
+    over the rows, so both give the same outputs.
 
     Args:
         config: Scales and thresholds (:func:`calibrate_channels`).
+        dt_s: Sampling period [s] (for ``const_s`` and ``clear_s`` in samples); None: the
+            median time step of the log (:meth:`run`) or the first time step
+            (:meth:`update`).
 
     Example:
         >>> cfg = calibrate_channels([with_described_vfs(clean_walk)])
         >>> out = ChannelMonitor(cfg).run(with_described_vfs(faulty_walk))
         >>> out["flag_ft_r_fz"], out["kind_ft_r_fz"], out["recovered_ft_r_fz"]
+        >>> live = ChannelMonitor(cfg, dt_s=0.001)
+        >>> row_out = live.update(row)   # dict: time, ft_*, vfs_*, contact_est_* or _ref_*
     """
 
-    def __init__(self, config: ChannelConfig) -> None:
+    def __init__(self, config: ChannelConfig, dt_s: float | None = None) -> None:
         self.config = config
+        self._dt_given = dt_s
+        self.channels: list[str] | None = None
+        self.reset()
 
+    def reset(self) -> None:
+        """Forget everything (flags, sums, contact history, channel list)."""
+        self.dt_s = self._dt_given
+        self._t_prev = math.nan
+        self.gate = ContactPhases(self.config.guard_s)
+        self._state: dict[str, _Channel] = {}
+
+    # ------------------------------------------------------------------ batch
     def run(self, log: pd.DataFrame) -> pd.DataFrame:
         """``log`` plus ``flag_<ch>``, ``kind_<ch>``, ``fault_est_<ch>``, ``recovered_<ch>``
         and ``onset_est_<ch>`` [s] for every F/T channel ``<ch>`` (``ft_r_fz``, ...).
@@ -222,93 +330,174 @@ class ChannelMonitor:
             LogFormatError: No F/T channel with its virtual channel, no contact column,
                 or a channel without a calibrated scale.
         """
-        cfg = self.config
         chans = _channels(log)
-        missing = [c for c in chans if c not in cfg.sigma]
+        self._check(chans)
+        t = log["time"].to_numpy(float)
+        cr, cl = _contact_columns(log)
+        self.reset()
+        self.channels = chans
+        if self.dt_s is None and t.size > 1:
+            self.dt_s = float(np.median(np.diff(t)))
+        xs = [log[c].to_numpy(float).tolist() for c in chans]
+        vs = [log[f"vfs_{c[3:]}"].to_numpy(float).tolist() for c in chans]
+        n = t.size
+        cols = {c: (np.zeros(n, bool), np.full(n, "none", dtype=object), np.zeros(n),
+                    np.zeros(n), np.full(n, np.nan)) for c in chans}
+        tl, crl, cll = t.tolist(), cr.tolist(), cl.tolist()
+        for k in range(n):
+            step = self._step(tl[k], crl[k], cll[k], [x[k] for x in xs], [v[k] for v in vs])
+            for c, o in zip(chans, step, strict=True):
+                a = cols[c]
+                a[0][k], a[1][k], a[2][k], a[3][k], a[4][k] = o
+        out = log.copy()
+        for c in chans:
+            for name, arr in zip(("flag", "kind", "fault_est", "recovered", "onset_est"),
+                                 cols[c], strict=True):
+                out[f"{name}_{c}"] = arr
+        out.attrs = {**log.attrs, "channel_monitor": {"h": self.config.h,
+                                                      "kappa": self.config.kappa,
+                                                      "source": self.config.source}}
+        return out
+
+    def _check(self, chans: list[str]) -> None:
+        missing = [c for c in chans if c not in self.config.sigma]
         if missing:
             raise LogFormatError(f"channel monitor: no calibrated sigma for {missing}; "
                                  "run calibrate_channels on fault-free logs of this robot")
-        t = log["time"].to_numpy(float)
-        ok = channel_valid_mask(log, cfg.guard_s)
-        dt = float(np.median(np.diff(t)))
-        loaded = _loaded(log)
-        out = log.copy()
-        for c in chans:
-            x = log[c].to_numpy(float)
-            v = log[f"vfs_{c[3:]}"].to_numpy(float)
-            ld = loaded[_side(c)]
-            sig = np.where(ld, cfg.sigma[c][0], cfg.sigma[c][1])
-            cols = self._channel(t, x, v, ok[:, _side(c)], ld, sig,
-                                 max(2, int(round(cfg.const_s / dt))))
-            for k, arr in cols.items():
-                out[f"{k}_{c}"] = arr
-        out.attrs = {**log.attrs, "channel_monitor": {"h": cfg.h, "kappa": cfg.kappa,
-                                                      "source": cfg.source}}
+
+    # -------------------------------------------------------------- streaming
+    def update(self, sample: dict[str, Any]) -> dict[str, Any]:
+        """One sample (``time``, ``ft_<side>_<axis>``, ``vfs_<side>_<axis>``,
+        ``contact_est_<side>`` or ``contact_ref_<side>``); returns ``flag_<ch>``,
+        ``kind_<ch>``, ``fault_est_<ch>``, ``recovered_<ch>`` and ``onset_est_<ch>`` of
+        every channel. The channels are fixed at the first call (every calibrated
+        channel the sample carries with its virtual channel). A missing or non-numeric
+        value is taken as NaN (no test; never an exception).
+
+        Raises:
+            LogFormatError: At the first call, when the sample has no F/T channel with
+                its virtual channel.
+        """
+        if self.channels is None:
+            chans = [c for c in self.config.sigma if c in sample and f"vfs_{c[3:]}" in sample]
+            if not chans:
+                raise LogFormatError("channel monitor: the sample has no calibrated "
+                                     "ft_<side>_<axis> channel with its vfs_<side>_<axis>")
+            self.channels = chans
+
+        def num(key: str) -> float:
+            try:
+                return float(sample.get(key, math.nan))
+            except (TypeError, ValueError):
+                return math.nan
+
+        def contact(side: str) -> bool:
+            c = num(f"contact_est_{side}")
+            return (c if math.isfinite(c) else num(f"contact_ref_{side}")) > 0.5
+
+        t = num("time")
+        if not math.isfinite(t):
+            t = self._t_prev + (self.dt_s or 0.0) if math.isfinite(self._t_prev) else 0.0
+        if self.dt_s is None and math.isfinite(self._t_prev) and t > self._t_prev:
+            self.dt_s = t - self._t_prev
+        res = self._step(t, contact("r"), contact("l"), [num(c) for c in self.channels],
+                         [num(f"vfs_{c[3:]}") for c in self.channels])
+        out: dict[str, Any] = {}
+        for c, (fl, kd, fe, rc, on) in zip(self.channels, res, strict=True):
+            out[f"flag_{c}"], out[f"kind_{c}"], out[f"fault_est_{c}"] = fl, kd, fe
+            out[f"recovered_{c}"], out[f"onset_est_{c}"] = rc, on
         return out
 
-    def _channel(self, t: np.ndarray, x: np.ndarray, v: np.ndarray, ok: np.ndarray,
-                 loaded: np.ndarray, sigma: np.ndarray, n_const: int) -> dict[str, Any]:
+    # ------------------------------------------------------------------- core
+    def _step(self, t: float, cr: bool, cl: bool, xs: list[float],
+              vs: list[float]) -> list[tuple[bool, str, float, float, float]]:
+        self._t_prev = t
+        ok = self.gate.step(t, cr, cl)
+        dt = self.dt_s if self.dt_s else 1e-3
+        n_const = max(3, int(round(self.config.const_s / dt)))
+        n_clear = int(round(self.config.clear_s / dt))
+        out = []
+        assert self.channels is not None
+        for c, x, v in zip(self.channels, xs, vs, strict=True):
+            st = self._state.get(c)
+            if st is None:
+                st = self._state[c] = _Channel()
+            loaded = cr if _side(c) == 0 else cl
+            out.append(self._channel_step(st, c, t, x, v, ok, loaded, n_const, n_clear))
+        return out
+
+    def _channel_step(self, st: _Channel, c: str, t: float, x: float, v: float, ok: bool,
+                      loaded: bool, n_const: int, n_clear: int,
+                      ) -> tuple[bool, str, float, float, float]:
         cfg = self.config
-        n = t.size
-        flag = np.zeros(n, bool)
-        kind = np.full(n, "none", dtype=object)
-        fault = np.zeros(n)
-        gp = gn = 0.0
-        start = None  # index where the current CUSUM excursion left zero
-        onset = None
-        frozen = False
-        run = 1
-        sums = np.zeros(6)  # Σr, Σ1, Στr, Σττ, Σvr, Σvv on valid samples since onset
-        srr = 0.0
-        est = (0.0, 0.0, 1.0)
-        for k in range(n):
-            if k > 0 and x[k] == x[k - 1] and math.isfinite(x[k]):
-                run += 1
-            else:
-                run = 1
-            r = x[k] - v[k]
-            if onset is not None and not frozen and run >= n_const:
-                frozen = True  # flagged by the CUSUM first (a jump to the frozen value)
-            if onset is None:
-                if (loaded[k] or ok[k]) and run >= n_const:
-                    onset, frozen = k - run + 1, True
-                elif ok[k] and math.isfinite(r):
-                    if gp == 0.0 and gn == 0.0:
-                        start = k
-                    gp, gn = cusum_step(gp, gn, r / sigma[k], cfg.kappa)
-                    if max(gp, gn) > cfg.h:
-                        onset = start if start is not None else k
-                        for j in range(onset, k + 1):  # the evidence so far
-                            if ok[j] and math.isfinite(x[j] - v[j]):
-                                tau = t[j] - t[onset]
-                                rj = x[j] - v[j]
-                                sums += (rj, 1.0, tau * rj, tau * tau, v[j] * rj, v[j] * v[j])
-                                srr += rj * rj
-                if onset is None:
-                    continue
-            elif not frozen and ok[k] and math.isfinite(r):
-                tau = t[k] - t[onset]
-                sums += (r, 1.0, tau * r, tau * tau, v[k] * r, v[k] * v[k])
-                srr += r * r
-            flag[k] = True
-            if frozen:
-                kind[k] = "frozen"
-                fault[k] = x[k] - v[k]
-                continue
-            kind[k], est = _best_fit(sums, srr)
-            b, a, g = est
-            tau = t[k] - t[onset]
-            fault[k] = {"offset": b, "drift": a * tau,
-                        "gain": (g - 1.0) / g * x[k] if g != 0 else 0.0}[kind[k]]
-        recovered = np.where(kind == "frozen", v, x - fault)
-        onset_t = np.full(n, np.nan)
-        if onset is not None:
-            onset_t[flag] = t[onset]
-        return {"flag": flag, "kind": kind, "fault_est": fault, "recovered": recovered,
-                "onset_est": onset_t}
+        if math.isfinite(x) and x == st.last_x:
+            st.run += 1
+        else:
+            st.run = 1 if math.isfinite(x) else 0
+        st.last_x = x
+        r = x - v
+        valid = ok and math.isfinite(r)
+        sig = cfg.sigma[c][0 if loaded else 1]
+        const = st.run >= n_const
+        if not st.flag:
+            if (loaded or ok) and const:
+                st.flag, st.frozen, st.last_alarm_s = True, True, t
+                st.onset_s = t - (st.run - 1) * (self.dt_s or 0.0)
+                st.gp = st.gn = 0.0
+                st.excursion.clear()
+            elif valid:
+                if st.gp == 0.0 and st.gn == 0.0:
+                    st.excursion.clear()
+                st.excursion.append((t, r, v))
+                st.gp, st.gn = cusum_step(st.gp, st.gn, r / sig, cfg.kappa)
+                if max(st.gp, st.gn) > cfg.h:
+                    st.flag, st.last_alarm_s = True, t
+                    st.onset_s = st.excursion[0][0]
+                    for tj, rj, vj in st.excursion:  # the evidence so far
+                        st.add(tj, rj, vj)
+                    st.excursion.clear()
+                    st.gp = st.gn = 0.0
+                elif len(st.excursion) > _MAX_EXCURSION:
+                    del st.excursion[: len(st.excursion) // 2]
+            if not st.flag:
+                return False, "none", 0.0, x, math.nan
+        else:
+            if const:
+                if not st.frozen:  # flagged by the CUSUM first (a jump to the frozen value)
+                    st.frozen = True
+                if loaded or ok:
+                    st.last_alarm_s = t
+            elif st.frozen and (loaded or ok) and st.run == 1:
+                st.quiet += 1  # the reading varies again
+            if valid:
+                if not st.frozen:
+                    st.add(t, r, v)
+                st.gp, st.gn = cusum_step(st.gp, st.gn, r / sig, cfg.kappa)
+                if max(st.gp, st.gn) > cfg.h:
+                    if not st.frozen:
+                        st.last_alarm_s = t
+                    st.gp = st.gn = 0.0
+                elif not st.frozen and abs(r / sig) < cfg.kappa:
+                    st.quiet += 1
+            if (t - st.last_alarm_s >= cfg.clear_s
+                    and st.quiet >= n_clear * cfg.clear_valid_fraction):
+                st.clear_flag()
+                st.gp = st.gn = 0.0
+                st.excursion.clear()
+                return False, "none", 0.0, x, math.nan
+        if st.frozen:
+            return True, "frozen", r, v, st.onset_s
+        kind, (b, a, g) = _best_fit(st.sums, st.srr)
+        fault = {"offset": b, "drift": a * (t - st.onset_s),
+                 "gain": (g - 1.0) / g * x if g != 0 else 0.0}[kind]
+        return True, kind, fault, x - fault, st.onset_s
 
 
-def _best_fit(s: np.ndarray, srr: float) -> tuple[str, tuple[float, float, float]]:
+#: Longest fault-free CUSUM excursion kept as onset evidence [samples].
+_MAX_EXCURSION = 200_000
+
+
+def _best_fit(s: list[float], srr: float) -> tuple[str, tuple[float, float, float]]:
     """Kind with the least squared error among offset, drift and gain fits, and the fitted
     ``(b, a, g)``."""
     sr, n, str_, stt, svr, svv = s

@@ -90,6 +90,10 @@ class Detector:
         self.totals = FootTotalTest()
         #: Identical readings of a loaded sensor that mean frozen (``const_s`` at ``dt_s``).
         self.const_samples = self.tuning.const_samples(config.thresholds.const_s, config.dt_s)
+        #: Largest chance per sample and sensor that a healthy (quantised) sensor's
+        #: reading repeats as long as a frozen one: the calibrated false-alarm rate.
+        self.const_chance = min(
+            0.5, config.thresholds.false_alarm_rate_per_hour * config.dt_s / 3600.0 / _N)
         self.reset()
 
     def reset(self) -> None:
@@ -135,7 +139,8 @@ class Detector:
             s.repeats = 0
             s.last_reading_n = _NAN
             return "nan"
-        alarm = "const" if constant_test(s, xi, loaded_ok, self.const_samples) else ""
+        const = constant_test(s, xi, loaded_ok, self.const_samples, self.const_chance)
+        alarm = "const" if const else ""
         if swing_ok:
             seen.res_swing[i] = xi
             hit, seen.stat_swing[i] = swing_test(s, xi, th)

@@ -7,7 +7,9 @@ evaluated only where its gate is open (:mod:`grfguard.detect.gating`):
 - :func:`constant_test`: a loaded sensor whose reading repeats exactly
   ``const_samples`` times (``Thresholds.const_s`` seconds at the log's rate, see
   :meth:`~grfguard.detect.tuning.DetectTuning.const_samples`) is frozen, stuck or
-  clipped (a healthy load cell always shows noise);
+  clipped (a healthy load cell always shows noise; a quantised one repeats by chance,
+  so the run must also be longer than its own chance repeats explain, see
+  :func:`constant_test`);
 - :func:`swing_test`: in swing the true force is zero, so ``z = N_meas / σ_swing``;
 - :func:`corner_test`: in clean single support ``r = (N_meas - N̂) / weight`` per corner
   (N̂ the VFS corner force), an additive fault found in swing compensated;
@@ -36,17 +38,42 @@ _STANCE_SOURCES = ("total", "corner")
 _NAN = float("nan")
 
 
-def constant_test(s: SensorState, x_n: float, loaded: bool, const_samples: int) -> bool:
+def constant_test(
+    s: SensorState, x_n: float, loaded: bool, const_samples: int, max_chance: float = 0.0
+) -> bool:
     """Track exact repetitions of the (finite) reading ``x_n`` [N]; True = alarm (the
-    reading repeated ``const_samples`` times on a loaded foot)."""
-    if x_n == s.last_reading_n:
+    reading repeated ``const_samples`` times on a loaded foot).
+
+    With ``max_chance`` > 0 the run must also be one a healthy sensor makes with at most
+    that probability: with ``p`` the sensor's own share of exact repeats among its
+    consecutive loaded readings while unflagged (``(repeats + 1) / (pairs + 2)``, the
+    run in progress left out; unloaded readings are left out too, a cell clipped at zero
+    in swing repeats without telling anything about stance), ``n`` identical readings
+    need ``p^(n-1) <= max_chance``. A sensor whose readings never repeat (no
+    quantisation) keeps ``p`` near 0 and ``const_samples`` decides; a coarsely quantised
+    one at a low rate needs a longer run.
+    """
+    prev = s.last_reading_n
+    same = x_n == prev
+    if same:
         s.repeats += 1
     else:
+        if not s.flag:  # a run that ended unflagged: its repeats were chance repeats
+            s.pairs += s.run_pairs
+            s.chance_repeats += s.run_repeats
+        s.run_pairs = s.run_repeats = 0
         s.repeats = 0
         if s.flag and s.source == "const":
             s.varied = True
+    if loaded and math.isfinite(prev):
+        s.run_pairs += 1
+        s.run_repeats += same
     s.last_reading_n = x_n
     if s.repeats + 1 >= const_samples and loaded:
+        if max_chance > 0.0:
+            p = (s.chance_repeats + 1) / (s.pairs + 2)
+            if p < 1.0 and s.repeats * math.log(p) > math.log(max_chance):
+                return False
         if s.flag and s.source == "const" and s.varied and x_n == s.const_value_n:
             s.const_returns += 1  # the flat top came back: saturation
             s.varied = False

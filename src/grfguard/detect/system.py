@@ -38,7 +38,7 @@ from grfguard.model.robot import SURALP, RobotConfig
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
     "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
-    "hold_unarmed_tests",
+    "hold_unarmed_tests", "VibrationConfig", "AccVibrationDetector", "swing_load_to_stance",
 ]
 
 
@@ -139,6 +139,10 @@ class CommonModeMonitor:
         self._theta = np.zeros(3)
         self._sum_r = 0.0
         self._sum_v = 0.0
+        self._sr_f = [0.0, 0.0]  # per foot: summed residuals, virtual forces
+        self._sv_f = [0.0, 0.0]
+        self._mv_f = [[0.0, 0.0], [0.0, 0.0]]  # per foot: sum v L x / S_x, sum v L y / S_y
+        self._alpha_f = [0.0, 0.0]
         self._loaded_s = 0.0
         self._armed_s = 0.0
 
@@ -154,6 +158,7 @@ class CommonModeMonitor:
         vfs: Sequence[float],
         valid_foot: Sequence[bool] = (True, True),
         frozen: bool = False,
+        planned: Sequence[float] | None = None,
     ) -> CommonModeResult:
         """One sample.
 
@@ -163,6 +168,10 @@ class CommonModeMonitor:
             valid_foot: Per foot (right, left): the foot is in contact and its virtual
                 forces are valid.
             frozen: Do not learn from this sample (e.g. a sensor is flagged).
+            planned: Planned contact per foot (right, left); when given, only planned
+                single support is learned from (the virtual sensor may put the whole
+                load on one foot in planned double support while the other still
+                carries some: a wrong total).
 
         Returns:
             The :class:`CommonModeResult` (never raises on bad numbers).
@@ -177,6 +186,9 @@ class CommonModeMonitor:
                 for f in range(2)]
         if c.single_support_only and all(feet):
             feet = [False, False]
+        if planned is not None and c.single_support_only and not (
+                all(isf(q) for q in planned) and (planned[0] > 0.5) != (planned[1] > 0.5)):
+            feet = [False, False]
         use = [feet[i // 4] and ok[i] for i in range(8)]
         if any(use):
             self._armed_s += self.dt_s
@@ -189,7 +201,8 @@ class CommonModeMonitor:
         n_use = sum(use)
         if n_use >= 3:
             # a residual that stands out from the others is a sensor's, not the model's
-            e = {i: abs(res[i] - (a0 * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
+            af = self._alpha_f
+            e = {i: abs(res[i] - (af[i // 4] * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
                  for i in range(8) if use[i]}
             worst = max(e, key=e.__getitem__)
             if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
@@ -200,6 +213,11 @@ class CommonModeMonitor:
             M *= lam
             b *= lam
             sr = sv = 0.0
+            for f in range(2):
+                self._sr_f[f] *= lam
+                self._sv_f[f] *= lam
+                self._mv_f[f][0] *= lam
+                self._mv_f[f][1] *= lam
             for i in range(8):
                 if use[i]:
                     p0, p1, p2 = phi[i]
@@ -215,16 +233,26 @@ class CommonModeMonitor:
                     b[2] += p2 * r
                     sr += r
                     sv += p0
+                    f = i // 4
+                    self._sr_f[f] += r
+                    self._sv_f[f] += p0
+                    self._mv_f[f][0] += p0 * p1
+                    self._mv_f[f][1] += p0 * p2
             M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
             self._sum_r = lam * self._sum_r + sr
             self._sum_v = lam * self._sum_v + sv
             self._loaded_s += self.dt_s
-            # alpha from the totals (robust), then the common CoP shift given alpha
+            # alpha from the totals (robust), per foot (each foot's load cells have their
+            # own mean gain) once the foot has data; then the common CoP shift given them
             alpha = self._sum_r / self._sum_v if self._sum_v > 0 else 0.0
+            sv_min = 0.1 * self._sum_v
+            self._alpha_f = [self._sr_f[f] / self._sv_f[f] if self._sv_f[f] > sv_min
+                             else alpha for f in range(2)]
+            af = self._alpha_f
             reg = 1e-6 * (M[1, 1] + M[2, 2] + 1e-9)
             m11, m12, m22 = M[1, 1] + reg, M[1, 2], M[2, 2] + reg
-            r1 = b[1] - alpha * M[1, 0]
-            r2 = b[2] - alpha * M[2, 0]
+            r1 = b[1] - af[0] * self._mv_f[0][0] - af[1] * self._mv_f[1][0]
+            r2 = b[2] - af[0] * self._mv_f[0][1] - af[1] * self._mv_f[1][1]
             det = m11 * m22 - m12 * m12
             if det > 0 and isf(det):
                 self._theta = np.array(
@@ -232,13 +260,19 @@ class CommonModeMonitor:
         warm = self._loaded_s >= c.warmup_s
         th = self._theta if warm else np.zeros(3)
         ratio = float(np.clip(th[0], -c.max_ratio, c.max_ratio))
+        ratio_f = [float(np.clip(q, -c.max_ratio, c.max_ratio)) if warm else 0.0
+                   for q in self._alpha_f]
         sx = float(np.clip(th[1], -c.max_cop_shift_m, c.max_cop_shift_m))
         sy = float(np.clip(th[2], -c.max_cop_shift_m, c.max_cop_shift_m))
         shift = np.array([sx, sy])
         reasons = []
         if warm:
-            if abs(ratio) > c.mass_ratio_limit:
-                reasons.append(f"total force off by {100 * ratio:+.1f} %")
+            if max(abs(q) for q in ratio_f) > c.mass_ratio_limit:
+                if abs(ratio_f[0] - ratio_f[1]) > c.mass_ratio_limit:
+                    reasons.append(f"total force off by {100 * ratio_f[0]:+.1f} % (right), "
+                                   f"{100 * ratio_f[1]:+.1f} % (left)")
+                else:
+                    reasons.append(f"total force off by {100 * ratio:+.1f} %")
             if math.hypot(sx, sy) > c.cop_shift_limit_m:
                 reasons.append(
                     f"attitude/CoM inconsistent (CoP shifted {100 * sx:+.1f} cm x, "
@@ -246,7 +280,7 @@ class CommonModeMonitor:
                 )
         if reasons:
             corr = np.array([
-                (ratio * v[i] if ok[i] else 0.0) + phi[i][1] * sx + phi[i][2] * sy
+                (ratio_f[i // 4] * v[i] if ok[i] else 0.0) + phi[i][1] * sx + phi[i][2] * sy
                 for i in range(8)])
             corr = np.where(np.isfinite(corr), corr, 0.0)
         else:  # no evidence against the model: leave the virtual forces alone
@@ -396,6 +430,146 @@ def hold_unarmed_tests(detector, zeros_armed: Sequence[bool], stance_armed: bool
                 s.corner_pos = s.corner_neg = 0.0
         if not stance:
             totals.g_pos[f] = totals.g_neg[f] = 0.0
+
+
+def swing_load_to_stance(
+    x: Sequence[float], v: list[float], tot: list[float], cref: Sequence[float],
+    weight_n: float, air_fraction: float = 0.05,
+) -> bool:
+    """Planned single support, the swing foot's readings near zero (it is in the air),
+    yet the virtual sensor put load on it: its kinematic contact (corner heights within
+    a few mm of the ground) was fooled by encoder offsets or the attitude. The whole
+    vertical force is the stance foot's: move it there (stance corners scaled, swing
+    foot zero), in place. Returns True when something was moved.
+
+    Args:
+        x: (8,) readings [N] (zeros removed).
+        v: (8,) virtual corner forces [N] (modified).
+        tot: Virtual foot forces (right, left) [N] (modified).
+        cref: Planned contact per foot.
+        weight_n: Robot weight [N].
+        air_fraction: The swing foot is in the air when its readings sum below this
+            fraction of the weight.
+    """
+    if not all(math.isfinite(q) for q in cref):
+        return False
+    plan = [q > 0.5 for q in cref]
+    if plan[0] == plan[1]:
+        return False
+    st, sw = (0, 1) if plan[0] else (1, 0)
+    other, mine = tot[sw], tot[st]
+    if not (math.isfinite(other) and math.isfinite(mine)) or other <= 0.0 or mine <= 0.0:
+        return False
+    xs = [x[i] for i in range(4 * sw, 4 * sw + 4)]
+    if not all(math.isfinite(q) for q in xs) or abs(math.fsum(xs)) > air_fraction * weight_n:
+        return False
+    k = (mine + other) / mine
+    for i in range(4 * st, 4 * st + 4):
+        v[i] *= k
+    for i in range(4 * sw, 4 * sw + 4):
+        v[i] = 0.0
+    tot[st], tot[sw] = mine + other, 0.0
+    return True
+
+
+# ------------------------------------------------------------------ accelerometer vibration
+@dataclass(frozen=True)
+class VibrationConfig:
+    """Settings of :class:`AccVibrationDetector`.
+
+    Attributes:
+        cutoff_hz: Corner of the causal 2nd-order Butterworth high-pass on the horizontal
+            accelerometer axes [Hz] (walking accelerations are slower).
+        time_constant_s: Time constant of the running mean of the squared high-passed
+            acceleration [s].
+        limit_m_s2: Horizontal RMS above ``cutoff_hz`` beyond which the accelerometer is
+            called vibrating [m/s^2] (simulated walks with 0.05 m/s^2 white noise: at most
+            0.17; the iCub spectrum of issue 10: about 1.1).
+        start_s: Samples before this time [s] of data never switch (the mean starts at 0).
+        corner_sigma_scale: Factor on ``corner_sigma`` once switched: the corner residual
+            noise of the virtual sensor without accelerometer relative to the default one
+            (thresholds calibrated on two 60 s exact-model walks: 0.0289 / 0.0109 = 2.65;
+            ``total_sigma`` and the swing thresholds are unchanged, 0.0038 both).
+    """
+
+    cutoff_hz: float = 5.0
+    time_constant_s: float = 2.0
+    limit_m_s2: float = 0.3
+    start_s: float = 0.5
+    corner_sigma_scale: float = 2.7
+
+    def __post_init__(self) -> None:
+        o = "vibration"
+        check_number(o, "cutoff_hz", self.cutoff_hz, 0.1, 1e4, "Hz")
+        check_number(o, "time_constant_s", self.time_constant_s, 0.01, 600.0, "s")
+        check_number(o, "limit_m_s2", self.limit_m_s2, 0.0, 1e3, "m/s^2")
+        check_number(o, "start_s", self.start_s, 0.0, 600.0, "s")
+        check_number(o, "corner_sigma_scale", self.corner_sigma_scale, 1.0, 100.0, "")
+
+
+class AccVibrationDetector:
+    """Tells when the accelerometer shakes too much for the virtual sensor to use it (the
+    horizontal CoM acceleration above 1 Hz comes from it; at the iCub's 1.5 m/s^2 the
+    corner forces are off by about 200 N RMS). Latches: once on, stays on until
+    :meth:`reset`. The same per-sample arithmetic serves :meth:`update` and :meth:`run`.
+
+    Args:
+        dt_s: Sampling period in [s].
+        config: Settings.
+    """
+
+    def __init__(self, dt_s: float = 0.001, config: VibrationConfig | None = None) -> None:
+        from scipy.signal import butter
+
+        self.dt_s = float(dt_s)
+        self.config = config if config is not None else VibrationConfig()
+        c = self.config
+        wn = min(0.95, 2.0 * c.cutoff_hz * self.dt_s)
+        b, a = butter(2, wn, "highpass")
+        self._b = [float(q) for q in b]
+        self._a = [float(q) for q in a]
+        self._lam = math.exp(-self.dt_s / c.time_constant_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (switch off)."""
+        self._z = [[0.0, 0.0], [0.0, 0.0]]  # DF2T states per axis
+        self._ms = 0.0
+        self._t = 0.0
+        self.on = False
+        self.rms_m_s2 = 0.0
+
+    def update(self, acc_x: float, acc_y: float) -> bool:
+        """One sample of the horizontal accelerometer axes [m/s^2]; returns :attr:`on`
+        (never raises; non-finite samples are skipped)."""
+        if self.on:
+            return True
+        if not (math.isfinite(acc_x) and math.isfinite(acc_y)):
+            return False
+        b0, b1, b2 = self._b
+        _, a1, a2 = self._a
+        e = 0.0
+        for j, u in enumerate((acc_x, acc_y)):
+            z = self._z[j]
+            y = b0 * u + z[0]
+            z[0] = b1 * u - a1 * y + z[1]
+            z[1] = b2 * u - a2 * y
+            e += y * y
+        self._ms = self._lam * self._ms + (1.0 - self._lam) * e
+        self._t += self.dt_s
+        self.rms_m_s2 = math.sqrt(self._ms)
+        if self._t >= self.config.start_s and self.rms_m_s2 > self.config.limit_m_s2:
+            self.on = True
+        return self.on
+
+    def run(self, acc_x: Sequence[float], acc_y: Sequence[float]) -> int:
+        """Reset, then feed whole columns; returns the first index switched on
+        (``len`` when never). Leaves the detector in its final state."""
+        self.reset()
+        for k, (ax, ay) in enumerate(zip(acc_x, acc_y, strict=True)):
+            if self.update(float(ax), float(ay)):
+                return k
+        return len(acc_x)
 
 
 # ------------------------------------------------------------------ gyro bias

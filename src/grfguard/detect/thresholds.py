@@ -56,7 +56,9 @@ class Thresholds:
         const_s: A loaded sensor whose reading stays exactly the same this long is frozen,
             stuck or clipped [s] (25 samples at 1 kHz, 5 at 200 Hz; at least
             :attr:`~grfguard.detect.tuning.DetectTuning.const_min_samples` identical
-            readings, 3 at 100 Hz). Files written before it was in seconds carry
+            readings, 3 at 100 Hz; longer for a sensor whose quantised readings repeat
+            by chance, see :func:`~grfguard.detect.residual_tests.constant_test`).
+            Files written before it was in seconds carry
             ``const_samples`` (counted at 1 kHz, the rate of every shipped calibration);
             it is read as ``const_samples`` x 1 ms.
         paper_eta_n: Eq. 33 thresholds on the low-passed η̂ of the paper's method, one per

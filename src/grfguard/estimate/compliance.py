@@ -20,13 +20,18 @@ corners in contact ``K``. The forces solve
     + w \lVert N - N^p \rVert^2 \quad \text{s.t.} \quad \sum_k N_k = F_z .
 
 With a small ``w`` the total force and the ZMP are met and the prior only picks the
-remaining freedom (for the affine part of the prior the constraints override it). Solved
-per sample as a non-negative least-squares problem (``scipy.optimize.nnls``) with the
-equality as a heavily weighted row, then rescaled so the sum is exact. Measured against the
-exact optimum (every free set of the KKT conditions, as in
-:mod:`grfguard.estimate.corner_qp`, on a 12 s default walk): at most 2.1e-9 N apart and
-never a worse objective; the exact enumeration took twice as long in batch, so the NNLS
-stays. ``tests/test_corner_qp.py`` checks the gap against daqp.
+remaining freedom (for the affine part of the prior the constraints override it).
+
+One solver for every corner QP of the package (:func:`qp_split`): the compiled
+active-set solver of :func:`grfguard.kernels.nnls.prior_qp` (the one inside the compiled
+virtual force sensor) with the equality as a heavily weighted row, then rescaled so the
+sum is exact, looped over the samples in one compiled call. The rigid split
+(``N^p = 0``) and the paper's per-foot split are the same problem with the uniform prior
+``F_z / n`` (on ``sum N = F_z``, ``|N - F_z/n|^2 = |N|^2 - F_z^2/n``), and the paper's
+``|C N - d|^2`` with ``d = F_z p_CoP`` is ``|sum_k N_k (r_k - p_CoP)|^2``. Measured
+(BENCHMARKS.md, "Contact-point QP"): within 1e-8 N of the exact-equality optimum
+(rationals), the sum exact to rounding; ``tests/reference/corner_qp.py`` keeps the exact
+enumeration the tests hold it to.
 """
 
 from __future__ import annotations
@@ -34,11 +39,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import nnls
 
-__all__ = ["compliance_prior", "solve_with_prior", "split_with_prior"]
-
-_RHO = 100.0
+__all__ = ["compliance_prior", "qp_split", "solve_with_prior", "split_with_prior"]
 
 
 def compliance_prior(
@@ -54,21 +56,42 @@ def compliance_prior(
     return out
 
 
-def _solve_core(rel: np.ndarray, prior: np.ndarray, total: float, sw: float) -> np.ndarray:
-    """NNLS on the contact corners only: rel (m, 2) [m], prior (m,) [N]."""
-    m = rel.shape[0]
-    A = np.zeros((3 + m, m))
-    A[0:2] = rel.T
-    A[2] = _RHO
-    A.reshape(-1)[3 * m :: m + 1] = sw
-    y = np.zeros(3 + m)
-    y[2] = _RHO * total
-    y[3:] = sw * prior
-    x = nnls(A, y, maxiter=50 * m)[0]
-    s = x.sum()
-    if s > 0:
-        x *= total / s
-    return x
+def qp_split(
+    points_rel_m: np.ndarray,
+    prior_n: np.ndarray,
+    total_force_n: np.ndarray,
+    weight: float,
+    allowed: np.ndarray | None = None,
+) -> np.ndarray:
+    """Corner forces of T samples (see the module header).
+
+    Args:
+        points_rel_m: (T, n, 2) corner points relative to the ZMP (or the CoP) [m],
+            ``n <= 16``.
+        prior_n: (T, n) prior forces [N].
+        total_force_n: (T,) total vertical force [N] (<= 0: zeros).
+        weight: ``w`` [m^2], > 0.
+        allowed: (T, n) corners allowed to carry load (default: all).
+
+    Returns:
+        (T, n) forces [N]: zero off ``allowed`` and for samples without load or allowed
+        corner, NaN for a sample with a non-finite input on an allowed corner.
+    """
+    # (imported here: grfguard.kernels imports this package's sensor)
+    from grfguard.kernels.nnls import MAX_CORNERS, new_scratch
+    from grfguard.kernels.split import qp_loop
+
+    rel = np.ascontiguousarray(points_rel_m, dtype=float)
+    T, n = rel.shape[0], rel.shape[1]
+    if n > MAX_CORNERS:
+        raise ValueError(f"qp_split handles at most {MAX_CORNERS} corners, got {n}")
+    ok = np.ones((T, n), bool) if allowed is None else np.ascontiguousarray(allowed, bool)
+    out = np.empty((T, n))
+    qp_loop(rel, np.ascontiguousarray(prior_n, dtype=float),
+             np.ascontiguousarray(total_force_n, dtype=float).reshape(T), ok,
+             math.sqrt(weight), out, *new_scratch(), np.zeros(MAX_CORNERS, np.int64),
+             np.zeros((MAX_CORNERS, 2)), np.zeros(MAX_CORNERS))
+    return out
 
 
 def solve_with_prior(
@@ -78,29 +101,11 @@ def solve_with_prior(
     weight: float,
     contact: np.ndarray,
 ) -> np.ndarray:
-    """One sample of the prior-regularized corner QP.
-
-    Args:
-        points_rel_m: (n, 2) corner points relative to the ZMP [m].
-        prior_n: (n,) prior forces [N].
-        total_force_n: Total vertical force [N] (<= 0 gives zeros).
-        weight: ``w`` [m^2].
-        contact: (n,) corners allowed to carry load.
-
-    Returns:
-        (n,) forces [N] (NaN if the input is not finite).
-    """
-    n = points_rel_m.shape[0]
-    out = np.zeros(n)
-    idx = np.flatnonzero(contact)
-    rel = points_rel_m[idx]
-    pr = prior_n[idx]
-    if not (math.isfinite(total_force_n) and np.isfinite(rel.sum() + pr.sum())):
-        return np.full(n, np.nan)
-    if idx.size == 0 or total_force_n <= 0.0:
-        return out
-    out[idx] = _solve_core(rel, pr, total_force_n, math.sqrt(weight))
-    return out
+    """One sample of :func:`qp_split`: points (n, 2) relative to the ZMP [m], prior (n,)
+    [N], total force [N], ``w`` [m^2], corners in contact (n,); returns (n,) forces [N]."""
+    return qp_split(np.asarray(points_rel_m, float)[None], np.asarray(prior_n, float)[None],
+                    np.array([total_force_n], float), weight,
+                    np.asarray(contact, bool)[None])[0]
 
 
 def split_with_prior(
@@ -113,8 +118,6 @@ def split_with_prior(
 ) -> np.ndarray:
     """Batch over T samples: corners (T, n, 3) in world [m], contact (T, n), ZMP (T, 2) [m],
     total force (T,) [N]; returns (T, n) forces [N]."""
-    T, n = contact.shape
-    out = np.empty((T, n))
     # vectorized prior (same arithmetic as compliance_prior)
     z = corners_W[:, :, 2]
     cnt = contact.sum(axis=1)
@@ -124,6 +127,4 @@ def split_with_prior(
         contact, (total_force_n / safe)[:, None] + stiffness_n_m * (zbar[:, None] - z), 0.0
     )
     rel = corners_W[:, :, :2] - zmp_W[:, None, :]
-    for i in range(T):
-        out[i] = solve_with_prior(rel[i], prior[i], float(total_force_n[i]), weight, contact[i])
-    return out
+    return qp_split(rel, prior, total_force_n, weight, contact)

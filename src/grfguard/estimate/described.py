@@ -18,6 +18,7 @@ Example:
 from __future__ import annotations
 
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -29,6 +30,7 @@ __all__ = [
     "described_robot",
     "calibration_frames",
     "described_thresholds",
+    "ft_channel_calibration",
     "is_described",
     "run_described",
     "with_described_vfs",
@@ -106,12 +108,15 @@ def is_described(df: pd.DataFrame) -> bool:
     return "robot_name" in df.attrs and "sensing" in df.attrs
 
 
-def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd.DataFrame:
+def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
+                  channels: Any = None) -> pd.DataFrame:
     """The monitor over a log of a described robot.
 
-    Ankle F/T sensors: :class:`~grfguard.detect.channels.ChannelMonitor` with the robot's
-    shipped channel thresholds (``grfguard/data/<name>_channels.toml``) on the
-    virtual channels (``config`` is not used).
+    Ankle F/T sensors: :class:`~grfguard.detect.channels.ChannelMonitor` with
+    ``channels`` (a :class:`~grfguard.detect.channels.ChannelConfig` or the path of a
+    channel TOML written by ``grfguard calibrate``), else the robot's shipped channel
+    thresholds (``grfguard/data/<name>_channels.toml``), on the virtual channels
+    (``config`` is not used).
 
     Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
     then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path, with the
@@ -123,9 +128,11 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd
         config: A :class:`~grfguard.detect.config.MonitorConfig` (default thresholds
             when None).
         robot: As in :func:`described_robot`.
+        channels: F/T robots only: the channel thresholds (default: the shipped ones).
 
     Raises:
         LogFormatError: The robot's sensing is not supported by the monitor.
+        ConfigError: ``channels`` is not a channel thresholds TOML.
     """
     from grfguard.detect.config import MonitorConfig
     from grfguard.detect.detector import VFS_TOTAL_COLUMNS
@@ -148,18 +155,47 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None) -> pd
     if sensing == "ft":
         from grfguard.detect.channels import ChannelConfig, ChannelMonitor
 
-        f = resources.files("grfguard") / "data" / f"{name}_channels.toml"
-        if not f.is_file():
-            raise LogFormatError(
-                f"no channel thresholds shipped for F/T robot {name!r}; calibrate them "
-                "with grfguard.detect.channels.calibrate_channels on fault-free logs and "
-                "run ChannelMonitor(config).run(with_described_vfs(log))")
+        if isinstance(channels, ChannelConfig):
+            ccfg = channels
+        else:
+            f = (Path(channels) if channels is not None
+                 else resources.files("grfguard") / "data" / f"{name}_channels.toml")
+            if not f.is_file():
+                raise LogFormatError(
+                    f"no channel thresholds {'file ' + str(f) if channels else 'shipped'} "
+                    f"for F/T robot {name!r}; make them with `grfguard calibrate "
+                    "<fault-free logs> -o channels.toml` and pass --thresholds channels.toml")
+            ccfg = ChannelConfig.from_toml_text(f.read_text(), str(f))
         if not all(f"vfs_{c[3:]}" in df for c in df.columns if c.startswith("ft_")):
             df = with_described_vfs(df, robot)
-        return ChannelMonitor(ChannelConfig.from_toml_text(f.read_text(), str(f))).run(df)
+        return ChannelMonitor(ccfg).run(df)
     raise LogFormatError(
         f"the monitor does not watch {sensing!r} sensing (robot {name!r}); 'corners' and "
         "'ft' are supported")
+
+
+def ft_channel_calibration(frames: list[pd.DataFrame],
+                           false_alarm_rate_per_hour: float = 0.1) -> str | None:
+    """``grfguard calibrate`` on logs of an ankle F/T robot: the channel thresholds TOML
+    (:func:`~grfguard.detect.channels.calibrate_channels` on the virtual channels), or
+    None when the logs are not of an F/T robot.
+
+    Raises:
+        LogFormatError: F/T logs mixed with others, or of different robots.
+    """
+    ft = [is_described(f) and f.attrs.get("sensing") == "ft" for f in frames]
+    if not any(ft):
+        return None
+    names = sorted({str(f.attrs.get("robot_name")) for f in frames})
+    if not all(ft) or len(names) > 1:
+        raise LogFormatError(f"calibrate: give logs of one ankle F/T robot only, got robots "
+                             f"{names} (F/T: {ft})")
+    from grfguard.detect.channels import calibrate_channels
+
+    logs = [f if all(f"vfs_{c[3:]}" in f for c in f.columns if c.startswith("ft_"))
+            else with_described_vfs(f) for f in frames]
+    cc = calibrate_channels(logs, false_alarm_rate_per_hour)
+    return f"# grfguard calibrate: channel thresholds of {names[0]!r}\n" + cc.to_toml()
 
 
 def calibration_frames(frames: list[pd.DataFrame]) -> list[pd.DataFrame]:

@@ -111,10 +111,6 @@ class KinematicModel:
         self.mass = float(self.body_mass.sum())
 
     # ------------------------------------------------------------------ one sample
-    def trunk_rotation(self, quat_imu_wxyz: np.ndarray) -> np.ndarray:
-        """Trunk rotation ``R_WT`` from the IMU attitude ``R_WI`` (``R_WT = R_WI R_TI^T``)."""
-        return quat_to_matrix(quat_imu_wxyz) @ self.R_TI.T
-
     def forward(self, q_rad: np.ndarray, quat_imu_wxyz: np.ndarray) -> KinematicFrames:
         """Kinematics of one sample.
 

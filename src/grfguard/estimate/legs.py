@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grfguard.estimate.corner_qp import solve_corner_qp
+from grfguard.estimate.compliance import qp_split
 
 __all__ = [
     "corner_contact",
@@ -103,7 +103,10 @@ def split_qp(
         (T, 8) forces [N] (``NaN`` where the input was not finite).
     """
     rel = corners_xy_W - zmp_W[:, None, :]
-    return solve_corner_qp(rel, np.zeros((rel.shape[0], 2)), total_force_n, weight, contact)
+    ok = np.asarray(contact, bool)
+    # the uniform prior F_z / n is the rigid QP's |N|^2 on the constraint sum N = F_z
+    prior = np.asarray(total_force_n, float)[:, None] / np.maximum(ok.sum(axis=1), 1)[:, None]
+    return qp_split(rel, np.broadcast_to(prior, ok.shape), total_force_n, weight, ok)
 
 
 def paper_alpha(com_y_rel_m: np.ndarray, cy_max_m: np.ndarray | float) -> np.ndarray:
@@ -182,5 +185,8 @@ def split_paper_feet(
     lo, hi = points_F.min(axis=0), points_F.max(axis=0)
     cop = np.clip(cop_F, lo, hi).reshape(-1, 2)  # (2T, 2): right, left of each sample
     fz = np.asarray(foot_force_n, float).reshape(-1)
-    forces = solve_corner_qp(points_F, np.maximum(fz, 0.0)[:, None] * cop, fz, weight)
+    n = points_F.shape[0]
+    # |C N - F_z CoP|^2 = |sum N_k (r_k - CoP)|^2 on sum N = F_z; uniform prior = |N|^2
+    rel = points_F[None, :, :] - cop[:, None, :]
+    forces = qp_split(rel, np.repeat(fz[:, None] / n, n, axis=1), fz, weight)
     return forces.reshape(-1, 8)

@@ -16,8 +16,8 @@ Pipeline (DESIGN.md, "Pipeline"):
 5. split (:mod:`grfguard.estimate.legs`, :mod:`grfguard.estimate.compliance`): contact per
    corner from the kinematic heights, one QP over all corners in contact with the total
    force, the ZMP and a sole-compliance prior (``qp``, default; the rigid QP of
-   :mod:`grfguard.estimate.corner_qp` without the prior), or the paper's alpha rule and
-   eq. 10-12 (``paper``, per-foot QPs of :mod:`grfguard.estimate.corner_qp`).
+   :func:`grfguard.estimate.compliance.qp_split` without the prior), or the paper's alpha
+   rule and eq. 10-12 (``paper``, per-foot QPs by the same solver).
 
 One implementation, two engines. The default settings (and every setting
 :meth:`grfguard.kernels.vfs.VFSKernel.supports`) run the compiled step of

@@ -34,7 +34,7 @@ from grfguard.kernels._jit import njit
 
 __all__ = [
     "KIND_NAMES", "SOURCE_NAMES", "N_SS", "N_GS", "N_PRM", "detect_params", "detect_step",
-    "detect_run", "new_state", "reset_state", "time_guard_run", "DetectKernel",
+    "detect_run", "new_state", "reset_state", "time_guard_run", "DetectKernel", "sensor_states",
 ]
 
 _NAN = math.nan
@@ -52,8 +52,8 @@ KIND_NAMES = ("none", "dropout", "saturation", "frozen", "stuck", "spikes", "noi
 (LAST, REP, SWP, SWN, CP, CN, FLAG, SRC, KIND, FT, LA, QV, ETA, GAIN, CV, VAR, CR,
  FN, FST, FSX, FSTT, FSTX, FSXX, FOUT,
  SN, SL, SR, SLL, SLR, SRR, SETA,
- HW, LREC, X1, X2, LP, SPIKE) = range(37)
-N_SS = 37
+ HW, LREC, X1, X2, LP, SPIKE, PAIRS, CHANCE) = range(39)
+N_SS = 39
 # ---------------------------------------------------------------- global state (gs)
 G_LAST_T, G_WSUM, G_WN = 0, 1, 2
 G_CPREV, G_TD, G_LO, G_SWD, G_GUARD = 3, 5, 7, 9, 11  # two each (right, left)
@@ -69,8 +69,10 @@ N_GS = 30
  P_NOISESCAT, P_GAINCHG, P_GAINMIN, P_STETA, P_ROUNDTOL, P_CLRDROP, P_HOLD_SAT,
  P_CLRCONSTFRAC, P_CLRSPK, P_CLRVALID, P_NCLEAR, P_NCLEAR_SAT,
  P_AFAST, P_ALP, P_RGAINMIN, P_BLEND,
- P_FLO, P_FHI, P_SETTLE, P_GAPLIM) = range(51)
-N_PRM = 51
+ P_FLO, P_FHI, P_SETTLE, P_GAPLIM, P_CHANCE) = range(52)
+N_PRM = 52
+#: Scratch floats :func:`detect_step` needs.
+N_WS_DETECT = 72
 
 #: System-state codes of :mod:`grfguard.guard` (``SYSTEM_STATES`` order).
 ST_OK, ST_GAP, ST_BACK, ST_CONST, ST_MISSING, ST_INVALID, ST_SETTLING = range(7)
@@ -103,7 +105,8 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
     p[P_SIG], p[P_SWK], p[P_SWH] = th.sigma_swing_n, th.swing_kappa, th.swing_h
     p[P_TOTSIG], p[P_TOTK], p[P_TOTH] = th.total_sigma, th.total_kappa, th.total_h
     p[P_CORSIG], p[P_CORK], p[P_CORH] = th.corner_sigma, th.corner_kappa, th.corner_h
-    p[P_CONSTN] = th.const_samples
+    p[P_CONSTN] = tn.const_samples(th.const_s, dt)
+    p[P_CHANCE] = min(0.5, th.false_alarm_rate_per_hour * c.dt_s / 3600.0 / 8)
     p[P_CLEVEL], p[P_CWFRAC] = tn.contact_level, tn.contact_weight_fraction
     p[P_GMINSW], p[P_GLOADSIG] = tn.guard_min_swing_fraction, tn.guard_load_sigma
     p[P_GMINSENS], p[P_OUTSIG] = tn.guard_min_sensors, tn.outlier_sigma
@@ -167,6 +170,8 @@ def reset_state(ss, gs):
         s[LREC] = 0.0
         s[X1] = s[X2] = s[LP] = _NAN
         s[SPIKE] = 0.0
+        s[PAIRS] = 0.0
+        s[CHANCE] = 0.0
     gs[:] = 0.0
     gs[G_LAST_T] = _NAN
     _reset_timeline(gs)
@@ -262,9 +267,9 @@ def _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, c
         if not math.isfinite(cv):
             cv = 1.0 if (math.isfinite(tot[f]) and math.isfinite(weight)
                          and tot[f] > prm[P_CWFRAC] * weight) else 0.0
-        contact[f] = cv > prm[P_CLEVEL]
+        contact[f] = 1.0 if cv > prm[P_CLEVEL] else 0.0
     for f in range(2):
-        cf = contact[f]
+        cf = contact[f] != 0.0
         prev = gs[G_CPREV + f]
         if prev < 0.0:
             gs[G_TD + f] = t if cf else _NAN
@@ -279,16 +284,16 @@ def _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, c
         gs[G_CPREV + f] = 1.0 if cf else 0.0
     for f in range(2):
         o = 1 - f
-        swing_ok[f] = False
-        ss_ok[f] = False
-        loaded_ok[f] = False
-        if not contact[f] and math.isfinite(gs[G_LO + f]):
-            swing_ok[f] = _in_valid_swing(gs, prm, f, t)
-        if contact[f] and math.isfinite(gs[G_TD + f]):
-            loaded_ok[f] = t - gs[G_TD + f] >= prm[P_GLOADED]
-            if not contact[o] and math.isfinite(gs[G_LO + o]):
-                ss_ok[f] = (t - gs[G_TD + f] >= prm[P_GTD]
-                            and _in_valid_swing(gs, prm, o, t))
+        swing_ok[f] = 0.0
+        ss_ok[f] = 0.0
+        loaded_ok[f] = 0.0
+        if contact[f] == 0.0 and math.isfinite(gs[G_LO + f]):
+            swing_ok[f] = 1.0 if _in_valid_swing(gs, prm, f, t) else 0.0
+        if contact[f] != 0.0 and math.isfinite(gs[G_TD + f]):
+            loaded_ok[f] = 1.0 if t - gs[G_TD + f] >= prm[P_GLOADED] else 0.0
+            if contact[o] == 0.0 and math.isfinite(gs[G_LO + o]):
+                ss_ok[f] = 1.0 if (t - gs[G_TD + f] >= prm[P_GTD]
+                                   and _in_valid_swing(gs, prm, o, t)) else 0.0
 
 
 @njit
@@ -387,20 +392,30 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
         s[LAST] = _NAN
         return SRC_NAN
     flagged = s[FLAG] != 0.0
-    # constant reading
-    if xi == s[LAST]:
+    # constant reading (residual_tests.constant_test)
+    prev = s[LAST]
+    if xi == prev:
         s[REP] += 1.0
     else:
+        if not flagged:  # a run that ended unflagged: its repeats were chance repeats
+            s[CHANCE] += s[REP]
+            s[PAIRS] += s[REP] + (1.0 if math.isfinite(prev) else 0.0)
         s[REP] = 0.0
         if flagged and s[SRC] == SRC_CONST:
             s[VAR] = 1.0
     s[LAST] = xi
     alarm = SRC_NONE
     if s[REP] + 1.0 >= prm[P_CONSTN] and loaded_ok:
-        if flagged and s[SRC] == SRC_CONST and s[VAR] != 0.0 and xi == s[CV]:
-            s[CR] += 1.0
-            s[VAR] = 0.0
-        alarm = SRC_CONST
+        chance = False
+        mc = prm[P_CHANCE]
+        if mc > 0.0:
+            p = (s[CHANCE] + 1.0) / (s[PAIRS] + 2.0)
+            chance = p < 1.0 and s[REP] * math.log(p) > math.log(mc)
+        if not chance:
+            if flagged and s[SRC] == SRC_CONST and s[VAR] != 0.0 and xi == s[CV]:
+                s[CR] += 1.0
+                s[VAR] = 0.0
+            alarm = SRC_CONST
     if swing_ok:
         z = xi / prm[P_SIG]
         gp = s[SWP] + z - prm[P_SWK]
@@ -646,7 +661,7 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
         fl = s[FLAG] != 0.0
         k = s[KIND]
         corrected[i] = _NAN
-        info[i] = True
+        info[i] = 1.0
         if fl and (k == K_OFFSET or k == K_DRIFT) and math.isfinite(s[ETA]):
             corrected[i] = xi - s[ETA]
         elif fl and k == K_GAIN and s[GAIN] > prm[P_RGAINMIN]:
@@ -670,19 +685,19 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
                 lo, hi = min(tmp[0], tmp[1]), max(tmp[0], tmp[1])
                 corrected[i] = max(lo, min(hi, tmp[2]))
         elif fl:
-            info[i] = False
+            info[i] = 0.0
         else:
             corrected[i] = xi
         s[X2] = s[X1]
         s[X1] = xi
         if fl and k == K_SATURATION and math.isfinite(xi) and xi != s[CV]:
             corrected[i] = xi
-            info[i] = True
+            info[i] = 1.0
     total = tot[0] + tot[1]
     n_lack = 0
     n_known = 0
     for j in range(8):
-        if not info[j]:
+        if info[j] == 0.0:
             n_lack += 1
         elif math.isfinite(corrected[j]):
             tmp[n_known] = corrected[j]
@@ -698,12 +713,12 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
             rec[i] = xi
             eta[i] = 0.0
             continue
-        if not info[i] and math.isfinite(total):
+        if info[i] == 0.0 and math.isfinite(total):
             rest = total - known
             if n_lack > 1:
                 sv = 0.0
                 for j in range(8):
-                    if not info[j]:
+                    if info[j] == 0.0:
                         sv += max(v[j], 0.0) if math.isfinite(v[j]) else 0.0
                 if sv > 0:
                     share = (max(v[i], 0.0) if math.isfinite(v[i]) else 0.0) / sv
@@ -715,13 +730,13 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
             repl = max(v[i], 0.0) if math.isfinite(v[i]) else 0.0
         # HandOver.update
         target = 1.0 if fl else 0.0
-        alpha = a_fast if (fl and not info[i]) else prm[P_BLEND]
+        alpha = a_fast if (fl and info[i] == 0.0) else prm[P_BLEND]
         w = s[HW] + (target - s[HW]) * alpha
         if abs(target - w) < 1e-6:
             w = target
         s[HW] = w
-        rec_fault = corrected[i] if info[i] and math.isfinite(corrected[i]) else repl
-        if fl and s[KIND] == K_SATURATION and not info[i]:
+        rec_fault = corrected[i] if info[i] != 0.0 and math.isfinite(corrected[i]) else repl
+        if fl and s[KIND] == K_SATURATION and info[i] == 0.0:
             rec_fault = max(rec_fault, s[CV])
         # HandOver.mix
         if not math.isfinite(rec_fault):
@@ -758,7 +773,7 @@ def detect_step(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, ws):
         cref, cest: Planned and estimated contact per foot (2,).
         gap: A time gap before this sample (the contact timeline restarts).
         rec, eta: Outputs (8,): recovered force and fault estimate [N].
-        ws: Float scratch of at least 48.
+        ws: Float scratch of at least :data:`N_WS_DETECT`.
     """
     if gap:
         _reset_timeline(gs)
@@ -771,23 +786,26 @@ def detect_step(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, ws):
         gs[G_WSUM] += t0 + t1
         gs[G_WN] += 1.0
     weight = gs[G_WSUM] / gs[G_WN] if gs[G_WN] != 0.0 else _NAN
-    swing_ok = np.zeros(2, np.bool_)
-    ss_ok = np.zeros(2, np.bool_)
-    loaded_ok = np.zeros(2, np.bool_)
-    contact = np.zeros(2, np.bool_)
+    # gates and flags as 0/1 floats in the scratch (no allocation per sample)
+    swing_ok = ws[0:2]
+    ss_ok = ws[2:4]
+    loaded_ok = ws[4:6]
+    contact = ws[6:8]
     _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, contact)
     for f in range(2):
-        if swing_ok[f] and _touchdown_guard(gs, prm, ss, f, t, x):
-            swing_ok[f] = False
-    infoless = np.zeros(2, np.bool_)
+        if swing_ok[f] != 0.0 and _touchdown_guard(gs, prm, ss, f, t, x):
+            swing_ok[f] = 0.0
+    infoless = ws[48:50]
+    infoless[0] = infoless[1] = 0.0
     for i in range(8):
         if ss[i, FLAG] != 0.0 and (ss[i, SRC] == SRC_NAN or ss[i, SRC] == SRC_CONST):
-            infoless[i // 4] = True
-    alarms = np.zeros(8, np.int64)
+            infoless[i // 4] = 1.0
+    alarms = ws[50:58]
     for i in range(8):
         f = i // 4
-        alarms[i] = _sensor_tests(ss[i], prm, t, x[i], v[i], tot[f], weight, swing_ok[f],
-                                  ss_ok[f], loaded_ok[f], infoless[f])
+        alarms[i] = _sensor_tests(ss[i], prm, t, x[i], v[i], tot[f], weight,
+                                  swing_ok[f] != 0.0, ss_ok[f] != 0.0, loaded_ok[f] != 0.0,
+                                  infoless[f] != 0.0)
     for f in range(2):
         if ss_ok[f] and math.isfinite(tot[f]) and math.isfinite(weight) and weight > 0:
             _foot_total(ss, gs, prm, f, x, v, tot[f], weight, alarms, ws[8:12], ws[12:16],
@@ -795,13 +813,13 @@ def detect_step(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, ws):
     for i in range(8):
         s = ss[i]
         if alarms[i] != SRC_NONE:
-            _apply_alarm(s, alarms[i], t, x[i])
+            _apply_alarm(s, int(alarms[i]), t, x[i])
         elif s[FLAG] != 0.0:
-            _maybe_clear(s, prm, t, x[i], loaded_ok[i // 4])
+            _maybe_clear(s, prm, t, x[i], loaded_ok[i // 4] != 0.0)
         if s[FLAG] != 0.0:
             _classify(s, prm, t, x[i])
     corrected = ws[32:40]
-    info = np.ones(8, np.bool_)
+    info = ws[58:66]
     _recover(ss, prm, x, v, tot, rec, eta, corrected, info, ws[16:32], ws[40:48])
 
 
@@ -809,7 +827,7 @@ def detect_step(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, ws):
 def detect_run(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, flag, kind):
     """:func:`detect_step` over every row (``t`` (T,), ``x``/``v`` (T, 8), ``tot``/``cref``/
     ``cest`` (T, 2), ``gap`` (T,) bool) into ``rec``/``eta``/``flag``/``kind`` (T, 8)."""
-    ws = np.zeros(64)
+    ws = np.zeros(N_WS_DETECT)
     for k in range(t.shape[0]):
         detect_step(ss, gs, prm, t[k], x[k], v[k], tot[k], cref[k], cest[k], gap[k], rec[k],
                     eta[k], ws)
@@ -863,7 +881,7 @@ class DetectKernel:
     def __init__(self, prm: np.ndarray) -> None:
         self.prm = np.ascontiguousarray(prm, dtype=float)
         self.ss, self.gs = new_state()
-        self.ws = np.zeros(64)
+        self.ws = np.zeros(N_WS_DETECT)
 
     def reset(self) -> None:
         """Back to a new monitor's state."""
@@ -884,3 +902,35 @@ class DetectKernel:
                    c(v, dtype=float), c(tot, dtype=float), c(cref, dtype=float),
                    c(cest, dtype=float), c(gap, dtype=np.bool_), rec, eta, flag, kind)
         return flag, kind, eta, rec
+
+
+def sensor_states(ss: np.ndarray) -> list:
+    """The per-sensor state ``ss`` as :class:`~grfguard.detect.sensor_state.SensorState`
+    objects (what ``Detector.sensors`` would hold)."""
+    from grfguard.detect.sensor_state import SensorState
+
+    out = []
+    for row in ss:
+        s = SensorState()
+        s.last_reading_n = float(row[LAST])
+        s.repeats = int(row[REP])
+        s.pairs, s.chance_repeats = int(row[PAIRS]), int(row[CHANCE])
+        s.swing_pos, s.swing_neg = float(row[SWP]), float(row[SWN])
+        s.corner_pos, s.corner_neg = float(row[CP]), float(row[CN])
+        s.flag = bool(row[FLAG])
+        s.source = SOURCE_NAMES[int(row[SRC])]
+        s.kind = KIND_NAMES[int(row[KIND])]
+        s.flag_time_s, s.last_alarm_s = float(row[FT]), float(row[LA])
+        s.quiet_valid = int(row[QV])
+        s.eta_n, s.gain, s.const_value_n = float(row[ETA]), float(row[GAIN]), float(row[CV])
+        s.varied, s.const_returns = bool(row[VAR]), int(row[CR])
+        w = s.swing
+        w.n, w.outliers = int(row[FN]), int(row[FOUT])
+        w.sum_t, w.sum_x, w.sum_tt = float(row[FST]), float(row[FSX]), float(row[FSTT])
+        w.sum_tx, w.sum_xx = float(row[FSTX]), float(row[FSXX])
+        st = s.stance
+        st.n = int(row[SN])
+        st.sum_load, st.sum_res, st.sum_load2 = float(row[SL]), float(row[SR]), float(row[SLL])
+        st.sum_load_res, st.sum_res2, st.eta_n = float(row[SLR]), float(row[SRR]), float(row[SETA])
+        out.append(s)
+    return out

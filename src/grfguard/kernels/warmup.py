@@ -29,4 +29,7 @@ def warm_up() -> float:
     X = np.full((2, N_IN), np.nan)
     k.run(X)
     k.step(X[0])
+    from grfguard.kernels.monitor import warm_monitor
+
+    warm_monitor()
     return time.perf_counter() - t0

@@ -1,0 +1,208 @@
+"""The compiled detector, recovery and whole monitor equal the pure-Python stages.
+
+These tests fail when the Python detector (``grfguard/detect/{detector,gating,
+residual_tests,classify,sensor_state,tuning}.py``) or recovery (``grfguard/recover/``)
+changes without the compiled mirror (``grfguard/kernels/detect.py``,
+``grfguard/kernels/monitor.py``) following: flags, kinds, onsets and the sensor states
+must be identical, the floats equal to 1e-9 N.
+"""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from grfguard.detect import Monitor, MonitorConfig
+from grfguard.detect.detector import Detector, DetectorInputs
+from grfguard.estimate.vfs import with_vfs_columns
+from grfguard.faults import inject_faults
+from grfguard.kernels.detect import KIND_NAMES, DetectKernel, detect_params, sensor_states
+from grfguard.model.robot import SENSOR_NAMES, SURALP
+from grfguard.recover.recovery import Recovery
+from grfguard.sim import GaitConfig, NoiseConfig, simulate
+
+#: The paper scenario and the nine fault kinds (two per log, one per foot).
+SCENARIOS = {
+    "paper": ["r1=frozen:0@5", "r2=offset:100@5", "r3=drift:15@5", "r4=offset:-100@5"],
+    "stuck+gain": ["r2=stuck@5.3", "l2=gain:1.6@5"],
+    "noise+spikes": ["r3=noise:25@5", "l2=spikes:120@5"],
+    "dropout+saturation": ["r4=dropout@5-6.5", "l2=saturation:200@5"],
+    "offset20+drift": ["r1=offset:20@5", "l3=drift:15@5.5"],
+    "frozen+offset": ["l1=frozen:0@5.2", "l4=offset:-100@5"],
+    "fault-free": [],
+    "quantised 0.5 N": ["l1=frozen:0@5.2"],
+}
+
+
+@pytest.fixture(scope="module")
+def walk() -> pd.DataFrame:
+    """8 s SURALP walk with the default VFS columns."""
+    return with_vfs_columns(simulate(SURALP, GaitConfig(duration=8.0), NoiseConfig(), seed=7))
+
+
+def _python_stages(log: pd.DataFrame, cfg: MonitorConfig):
+    inp = DetectorInputs.from_frames(log, log)
+    det, rec = Detector(cfg), Recovery(cfg)
+    n = len(log)
+    flag = np.zeros((n, 8), bool)
+    kind = np.empty((n, 8), object)
+    eta = np.zeros((n, 8))
+    out = np.zeros((n, 8))
+    for k in range(n):
+        t, x, v, tot, cref, cest = inp.sample(k)
+        d = det.step(t, x, v, tot, cref, cest)
+        o = rec.step(det.sensors, x, v, tot, d.columns)
+        for i, s in enumerate(SENSOR_NAMES):
+            flag[k, i] = o[f"flag_{s}"]
+            kind[k, i] = o[f"kind_{s}"]
+            eta[k, i] = o[f"eta_{s}"]
+            out[k, i] = o[f"recovered_{s}"]
+    return inp, det, flag, kind, eta, out
+
+
+def _assert_close(a: np.ndarray, b: np.ndarray, tol: float = 1e-9) -> None:
+    np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+    assert np.nanmax(np.abs(a - b), initial=0.0) <= tol
+
+
+@pytest.mark.parametrize("name", list(SCENARIOS))
+def test_compiled_detector_equals_python(walk: pd.DataFrame, name: str) -> None:
+    log = inject_faults(walk, SCENARIOS[name], seed=1) if SCENARIOS[name] else walk
+    if name.startswith("quantised"):  # chance repeats of a coarse load cell
+        log = log.copy()
+        for s in SENSOR_NAMES:
+            log[f"force_{s}"] = np.round(log[f"force_{s}"] / 0.5) * 0.5
+    cfg = MonitorConfig()
+    inp, det, flag, kind, eta, rec = _python_stages(log, cfg)
+    k = DetectKernel(detect_params(cfg, det.tuning))
+    n = len(log)
+    arr = [np.array(c, float).T for c in (inp.x, inp.v, inp.tot, inp.cref, inp.cest)]
+    f2, k2, e2, r2 = k.run(np.array(inp.t), *arr, np.zeros(n, bool))
+    np.testing.assert_array_equal(f2, flag)  # flags and onsets
+    np.testing.assert_array_equal(np.array(KIND_NAMES, object)[k2], kind)
+    _assert_close(e2, eta)
+    _assert_close(r2, rec)
+    for a, b in zip(sensor_states(k.ss), det.sensors, strict=True):  # final states
+        for slot in type(b).__slots__:
+            va, vb = getattr(a, slot), getattr(b, slot)
+            if slot in ("swing", "stance"):
+                for sub in type(vb).__slots__:
+                    x, y = getattr(va, sub), getattr(vb, sub)
+                    assert x == y or (math.isnan(x) and math.isnan(y)), (slot, sub)
+            else:
+                assert va == vb or (math.isnan(va) and math.isnan(vb)), slot
+    if name == "paper":
+        assert {SENSOR_NAMES[i] for i in np.flatnonzero(flag.any(axis=0))} >= {
+            "r1", "r2", "r3", "r4"}
+    if name == "fault-free":
+        assert not flag.any()
+
+
+def _bad_raw(walk: pd.DataFrame) -> pd.DataFrame:
+    """A raw log (no VFS columns) with every guard at work: NaN IMU, an inf and an
+    absurd force, constant and backward stamps, a gap, a bad quaternion."""
+    log = inject_faults(walk, SCENARIOS["paper"], seed=1)
+    raw = log.drop(columns=[c for c in log.columns if c.startswith(
+        ("vfs_", "com_est_", "contact_est_", "zmp_est"))]).copy()
+    ix = raw.index
+    raw.loc[ix[2000:2010], "imu_acc_z"] = np.nan
+    raw.loc[ix[2500], "force_l3"] = 1e30
+    raw.loc[ix[2600], "force_l1"] = -np.inf
+    raw.loc[ix[3000], "time"] = raw["time"].iloc[2999]
+    raw.loc[ix[3100], "time"] = raw["time"].iloc[3099] - 0.01
+    raw.loc[ix[3200], "time"] = np.nan
+    raw.loc[ix[3300], "imu_quat_x"] = 0.9
+    raw.loc[ix[3400], "imu_gyro_y"] = 1e6
+    return raw.drop(index=ix[5000:5100])
+
+
+@pytest.mark.parametrize(("vfs_inside", "standing"), [(True, True), (False, True),
+                                                      (True, False)])
+def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: bool,
+                                                standing: bool) -> None:
+    raw = _bad_raw(walk)
+    log = raw if vfs_inside else with_vfs_columns(raw)
+    mon = Monitor.for_log(log, standing=standing)
+    ref_mon = Monitor.for_log(log, compiled=False, standing=standing)
+    assert mon.compiled_reason() == ""
+    assert ref_mon.compiled_reason() != ""
+    out = mon.run(log)
+    ref = ref_mon.run(log)
+    assert list(out.columns) == list(ref.columns)
+    for c in ref.columns:
+        a, b = out[c].to_numpy(), ref[c].to_numpy()
+        if a.dtype.kind == "f":
+            _assert_close(a, b.astype(float))
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=c)
+    states = set(out["system_state"])
+    assert {"ok", "time_gap", "time_constant", "time_backwards", "time_missing",
+            "settling"} <= states
+    assert (out.loc[raw.index[2500], "kind_l3"] == "spikes") or not out.loc[
+        raw.index[2500], "flag_l3"]
+    # streaming through the compiled step equals the batch, dict and array calls alike
+    mon.reset()
+    rows = log.iloc[:3500].to_dict("records")
+    cols = mon.output_columns
+    X = np.column_stack([log[c].to_numpy(float) if c in log else np.full(len(log), np.nan)
+                         for c in mon.input_columns])[:3500]
+    twin = pickle.loads(pickle.dumps(mon))
+    batch = out.iloc[:3500].to_dict("records")
+    mon.reset()
+    twin.reset()
+    for k, r in enumerate(rows):
+        o = mon.update(r)
+        y = twin.update_array(np.ascontiguousarray(X[k]))
+        b = batch[k]
+        assert list(o) == [c for c in out.columns if c in o]  # the batch's column order
+        for j, c in enumerate(cols):
+            if c.startswith("kind_"):
+                assert KIND_NAMES[int(y[j])] == o[c] == b[c]
+            elif c == "system_state":
+                assert o[c] == b[c]
+            else:
+                want = float(b[c])
+                assert (y[j] == float(o[c]) == want) or (math.isnan(y[j]) and math.isnan(
+                    want) and math.isnan(float(o[c]))), (k, c)
+        assert o["system_reason"] == b["system_reason"], k
+
+
+def test_uncompiled_features_fall_back(walk: pd.DataFrame) -> None:
+    """The paper method, the common-mode layer and diagnostics run the Python stages;
+    ``update_array`` still works through them."""
+    for mon in (Monitor.for_log(walk, MonitorConfig(method="paper")),
+                Monitor.for_log(walk, common_mode=True),
+                Monitor.for_log(walk, MonitorConfig(diagnostics=True))):
+        assert mon.compiled_reason()
+        y = mon.update_array(np.full(len(mon.input_columns), np.nan))
+        assert y.shape == (len(mon.output_columns),)
+        assert np.isfinite(y[-9:-1]).all()  # recovered forces never NaN
+
+
+@pytest.fixture(scope="module")
+def stand() -> pd.DataFrame:
+    """3 s of standing, then walking (8 s, VFS columns)."""
+    return with_vfs_columns(simulate(SURALP, GaitConfig(duration=8.0, start_time=3.0),
+                                     NoiseConfig(), seed=3))
+
+
+@pytest.mark.parametrize("faults", [["r2=offset:40@1.6", "l3=drift:40@1.4"],
+                                    ["r2=gain:1.3@1.6"]])
+def test_compiled_standing_layer_equals_python(stand: pd.DataFrame, faults: list) -> None:
+    """Faults that start during a stand (the standing layer flags them, holds them after
+    the stand, weighs offset against gain) give the same outputs compiled and in Python."""
+    log = inject_faults(stand, faults, seed=2)
+    out = Monitor.for_log(log).run(log)
+    ref = Monitor.for_log(log, compiled=False).run(log)
+    for c in ref.columns:
+        a, b = out[c].to_numpy(), ref[c].to_numpy()
+        if a.dtype.kind == "f":
+            _assert_close(a, b.astype(float))
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=c)
+    early = out["time"] < 3.0
+    assert out.loc[early, "flag_r2"].any()  # flagged while standing
