@@ -15,6 +15,16 @@ Three stages, each its own module, wired here (the only module that knows all th
 
 :class:`Monitor` streams (``update(row)``, never raises on a bad sample) and batches
 (``run(log)``: reset plus the same steps over the whole log, identical numbers).
+
+Compiled path (the default, ``compiled=True``): when the settings are covered (method
+``default``, no common-mode layer, no diagnostics, the compiled virtual sensor or
+precomputed ``vfs_*`` columns) the guards, virtual sensor, detector, recovery and
+standing layer run as one compiled step per sample (:mod:`grfguard.kernels.monitor`),
+with the same outputs as these Python stages (``tests/test_kernels_detect.py``);
+``update_array(x) -> y`` is that step with flat arrays (layouts in
+:attr:`Monitor.input_columns` / :attr:`Monitor.output_columns`), ``run`` one compiled
+loop over the log. :meth:`Monitor.compiled_reason` says why a monitor runs the Python
+stages instead.
 """
 
 from __future__ import annotations
