@@ -52,8 +52,8 @@ KIND_NAMES = ("none", "dropout", "saturation", "frozen", "stuck", "spikes", "noi
 (LAST, REP, SWP, SWN, CP, CN, FLAG, SRC, KIND, FT, LA, QV, ETA, GAIN, CV, VAR, CR,
  FN, FST, FSX, FSTT, FSTX, FSXX, FOUT,
  SN, SL, SR, SLL, SLR, SRR, SETA,
- HW, LREC, X1, X2, LP, SPIKE, PAIRS, CHANCE) = range(39)
-N_SS = 39
+ HW, LREC, X1, X2, LP, SPIKE, PAIRS, CHANCE, RUNP, RUNR) = range(41)
+N_SS = 41
 # ---------------------------------------------------------------- global state (gs)
 G_LAST_T, G_WSUM, G_WN = 0, 1, 2
 G_CPREV, G_TD, G_LO, G_SWD, G_GUARD = 3, 5, 7, 9, 11  # two each (right, left)
@@ -172,6 +172,8 @@ def reset_state(ss, gs):
         s[SPIKE] = 0.0
         s[PAIRS] = 0.0
         s[CHANCE] = 0.0
+        s[RUNP] = 0.0
+        s[RUNR] = 0.0
     gs[:] = 0.0
     gs[G_LAST_T] = _NAN
     _reset_timeline(gs)
@@ -394,15 +396,21 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
     flagged = s[FLAG] != 0.0
     # constant reading (residual_tests.constant_test)
     prev = s[LAST]
-    if xi == prev:
+    same = xi == prev
+    if same:
         s[REP] += 1.0
     else:
         if not flagged:  # a run that ended unflagged: its repeats were chance repeats
-            s[CHANCE] += s[REP]
-            s[PAIRS] += s[REP] + (1.0 if math.isfinite(prev) else 0.0)
+            s[PAIRS] += s[RUNP]
+            s[CHANCE] += s[RUNR]
+        s[RUNP] = 0.0
+        s[RUNR] = 0.0
         s[REP] = 0.0
         if flagged and s[SRC] == SRC_CONST:
             s[VAR] = 1.0
+    if loaded_ok and math.isfinite(prev):  # chance repeats: loaded readings only
+        s[RUNP] += 1.0
+        s[RUNR] += 1.0 if same else 0.0
     s[LAST] = xi
     alarm = SRC_NONE
     if s[REP] + 1.0 >= prm[P_CONSTN] and loaded_ok:
@@ -915,6 +923,7 @@ def sensor_states(ss: np.ndarray) -> list:
         s.last_reading_n = float(row[LAST])
         s.repeats = int(row[REP])
         s.pairs, s.chance_repeats = int(row[PAIRS]), int(row[CHANCE])
+        s.run_pairs, s.run_repeats = int(row[RUNP]), int(row[RUNR])
         s.swing_pos, s.swing_neg = float(row[SWP]), float(row[SWN])
         s.corner_pos, s.corner_neg = float(row[CP]), float(row[CN])
         s.flag = bool(row[FLAG])

@@ -344,6 +344,8 @@ class MonitorKernel:
         self.ex = np.zeros(N_EX)
         self.xbuf = np.zeros(n_in)
         self.ybuf = np.zeros(len(self.out_cols))
+        self.sin = (n_in,)
+        self.sout = (len(self.out_cols),)
         self._pack()
 
     # Every array of the step lives in two buffers (floats F, ints I) so that a call from
