@@ -43,7 +43,14 @@ _drop_stale_cache()
 #: ``numba.njit`` with the on-disk cache and the GIL released.
 njit = functools.partial(numba.njit, cache=True, nogil=True, fastmath=False, error_model="numpy")
 
-__all__ = ["njit"]
+#: :data:`njit` without numba's reference counting (NRT): for the per-sample kernels, which
+#: allocate nothing. With NRT every array argument of every compiled call is incremented
+#: and decremented on entry and exit (a few hundred runtime calls per VFS sample); without
+#: it arrays are plain borrowed views. Such functions must not allocate arrays.
+njit_nort = functools.partial(numba.njit, cache=True, nogil=True, fastmath=False,
+                              error_model="numpy", _nrt=False)
+
+__all__ = ["njit", "njit_nort"]
 
 
 def _fma_intrinsic():

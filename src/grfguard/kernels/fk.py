@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grfguard.errors import ConfigError
-from grfguard.kernels._jit import borrow, njit, view1d, view2d
+from grfguard.kernels._jit import borrow, njit, njit_nort, view1d, view2d
 
 __all__ = ["TreeModel", "fk_tree", "fk_sites", "fk_batch", "N_WORK", "FREE", "BALL", "SLIDE",
            "HINGE"]
@@ -134,7 +134,7 @@ class TreeModel:
 # Scalar helpers (no array views: nothing to reference-count, everything stays in
 # registers); the operation order is MuJoCo's, so results are bit-equal where MuJoCo's
 # build does not fuse differently.
-@njit(inline="always")
+@njit_nort(inline="always")
 def _nq(q0, q1, q2, q3):
     """mju_normalize4: unit quaternion (identity below 1e-15; unchanged within 1e-15)."""
     n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
@@ -146,7 +146,7 @@ def _nq(q0, q1, q2, q3):
     return q0, q1, q2, q3
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _mq(a0, a1, a2, a3, b0, b1, b2, b3):
     """mju_mulQuat."""
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
@@ -155,7 +155,7 @@ def _mq(a0, a1, a2, a3, b0, b1, b2, b3):
             a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _rv(v0, v1, v2, q0, q1, q2, q3):
     """mju_rotVecQuat."""
     if v0 == 0 and v1 == 0 and v2 == 0:
@@ -169,7 +169,7 @@ def _rv(v0, v1, v2, q0, q1, q2, q3):
             v2 + 2 * (q1 * t1 - q2 * t0))
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _q2m(q0, q1, q2, q3):
     """mju_quat2Mat (row-major 9-tuple)."""
     if q0 == 1 and q1 == 0 and q2 == 0 and q3 == 0:
@@ -190,7 +190,7 @@ def _q2m(q0, q1, q2, q3):
             2 * (q13 - q02), 2 * (q23 + q01), (q00 - q22) - (q11 - q33))
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _mv(m0, m1, m2, m3, m4, m5, m6, m7, m8, v0, v1, v2):
     """mju_mulMatVec3 (row-major matrix entries)."""
     return (m0 * v0 + m1 * v1 + m2 * v2,
@@ -201,7 +201,7 @@ def _mv(m0, m1, m2, m3, m4, m5, m6, m7, m8, v0, v1, v2):
 # mj_local2Global (sameframe: 0 none, 1 body, 2 inertia, 3 body rotation, 4 inertia
 # rotation) is written out in _inertial_frames and fk_sites: a call per body with a
 # dozen array arguments costs more than the arithmetic.
-@njit
+@njit_nort
 def _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat):
     """``xipos``/``ximat`` of bodies 1.. from their inertial frames (sameframe 2 / 4, the
     inertial frame relative to itself, leaves them as they are)."""
@@ -229,7 +229,7 @@ def _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, x
                 ximat[i, k] = xmat[i, k]
 
 
-@njit
+@njit_nort
 def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
             body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
             jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com,
@@ -316,7 +316,7 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
 
 
-@njit
+@njit_nort
 def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
     """Copy ``qpos_in`` into ``qpos`` and normalise its free/ball quaternions."""
     for k in range(qpos.shape[0]):
@@ -332,7 +332,7 @@ def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
             qpos[a + 3] = q3
 
 
-@njit
+@njit_nort
 def _world_frame(xpos, xquat, xmat, xipos, ximat):
     """Body 0 (the world): zero position, identity orientation."""
     for k in range(3):
@@ -352,7 +352,7 @@ def _world_frame(xpos, xquat, xmat, xipos, ximat):
     ximat[0, 8] = 1.0
 
 
-@njit
+@njit_nort
 def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
     """mj_comPos: backward pass for the subtree CoMs [m] (MuJoCo 4 puts every body's own
     m x_i in first, then adds the children: same order here)."""
@@ -376,7 +376,7 @@ def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
                 subtree_com[i, k] = subtree_com[i, k] * inv
 
 
-@njit
+@njit_nort
 def fk_sites(sites, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
              ximat, site_xpos, site_xmat, work):
     """World pose of the chosen ``sites`` (k,) into ``site_xpos (k, 3)``, ``site_xmat (k, 9)``

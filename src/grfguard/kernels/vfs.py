@@ -40,7 +40,7 @@ from scipy.signal import butter, lfilter_zi
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
-from grfguard.kernels._jit import fma, njit, view1d, view2d
+from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
 from grfguard.kernels.nnls import prior_qp
 
@@ -74,14 +74,14 @@ def _state_size(nbr: int, order: int) -> int:
     return _S_FIXED + 15 * order + 12 * nbr
 
 
-@njit
+@njit_nort(inline="always")
 def _v2(a, o, n, m):
     """(n, m) C-contiguous view of ``a[o : o + n * m]`` without numpy's reshape call
     (which costs about 20 ns in compiled code)."""
     return view2d(a, o, n, m)
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _qmul(aw, ax, ay, az, bw, bx, by, bz):
     return (
         aw * bw - ax * bx - ay * by - az * bz,
@@ -91,7 +91,7 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):
     )
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _qexp(x, y, z):
     th = math.sqrt(x * x + y * y + z * z)
     if th < 1e-12:
@@ -100,7 +100,7 @@ def _qexp(x, y, z):
     return math.cos(0.5 * th), s * x, s * y, s * z
 
 
-@njit
+@njit_nort
 def _lfilter_step(b, a, zst, x, y, zi, init):
     """One DF2T step of every channel; ``zst`` (order, nch) state; ``init`` primes it."""
     order = b.shape[0] - 1
@@ -118,13 +118,13 @@ def _lfilter_step(b, a, zst, x, y, zi, init):
         y[c] = yn
 
 
-@njit
+@njit_nort
 def _sum8(a):
     # numpy's pairwise sum of a contiguous 8-vector
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
 
 
-@njit
+@njit_nort
 def _sum_seq(a, n):
     s = a[0]
     for i in range(1, n):
@@ -132,7 +132,7 @@ def _sum_seq(a, n):
     return s
 
 
-@njit
+@njit_nort
 def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
           tree, sites, ws, iws):
     """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
@@ -184,7 +184,7 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
     return True
 
 
-@njit
+@njit_nort
 def _valid_sample(x, y, state, prm):
     """Whether row ``x`` is usable (finite joints, attitude and the optional gyro, acc and
     contact reference; non-zero quaternion). If not, ``y`` repeats the last output (NaN
@@ -220,7 +220,7 @@ def _valid_sample(x, y, state, prm):
     return ok
 
 
-@njit
+@njit_nort(inline="always")
 def _scratch_views(ws, nq, nb):
     """Named views into the float scratch ``ws`` (fixed layout); the last one is the
     rest of ``ws`` (solver and FK work space). No allocation, no reshape call."""
@@ -288,7 +288,7 @@ def _scratch_views(ws, nq, nb):
             qp_dots, view1d(ws, o, ws.shape[0] - o))
 
 
-@njit
+@njit_nort
 def _attitude_filter(x, state, prm):
     """Complementary attitude filter (gyro prediction pulled towards the measured
     quaternion by ``katt``); returns and stores the unit attitude (w, x, y, z)."""
@@ -320,7 +320,7 @@ def _attitude_filter(x, state, prm):
     return aw, ax, ay, az
 
 
-@njit
+@njit_nort
 def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, xpos, xquat,
                 xmat, xipos, ximat, stc, msub, sxp, sxm, qin, pk, work, sel):
     """Forward kinematics with the trunk at the origin: bodies, IMU/corner/sole sites,
@@ -366,7 +366,7 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     return stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
 
 
-@njit
+@njit_nort
 def _stance(x, prm, pk):
     """Stance of the right and left foot: the contact reference if logged, else the
     foot whose lowest corner is within 1 cm of the lowest corner of both."""
@@ -382,7 +382,7 @@ def _stance(x, prm, pk):
     return st0, st1
 
 
-@njit
+@njit_nort
 def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
     """Leg odometry (no anchor attitude: the rotation correction is the identity):
     the trunk position in the world (3 floats) [m] and the ground height [m]; the anchor
@@ -409,7 +409,7 @@ def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
     return pwt0, pwt1, pwt2, ground
 
 
-@njit
+@njit_nort
 def _init_anchor(state, pk, sxp, st0, st1):
     """First anchor foot (the single stance foot, else the lower one) and its world
     position: the feet's midpoint (or the stance foot) at the origin, the sole on z = 0."""
@@ -435,7 +435,7 @@ def _init_anchor(state, pk, sxp, st0, st1):
     state[_S_ANCHOR] = anc
 
 
-@njit
+@njit_nort
 def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
     """Second differences over the last three samples of the IMU-relative CoM
     (``raw[0:3]``) and the IMU's world position (``raw[6:9]``) [m/s^2]; ``raw`` zeroed."""
@@ -463,7 +463,7 @@ def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
                 raw[off + k] = (v1 - v0) / dt
 
 
-@njit
+@njit_nort
 def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
                    order, dt):
     """Rate of the angular momentum about the CoM (``raw[3:6]``) [N m] from this and the
@@ -496,7 +496,7 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
     state[_S_PREVF] = 1.0
 
 
-@njit
+@njit_nort
 def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nbr, dt):
     """Angular momentum about the CoM ``cc`` (3 floats) [N m s]: the bodies' linear
     momenta (finite differences of their CoMs ``pb`` -> ``xipos``) plus their spin
@@ -553,7 +553,7 @@ def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nb
     return lin[0] + L0, lin[1] + L1, lin[2] + L2
 
 
-@njit
+@njit_nort
 def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v3d, aw, ax,
              ay, az, order, g):
     """Low-pass the raw rates and (if used) fuse the accelerometer; returns the total
@@ -590,7 +590,7 @@ def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v
     return mass * (cdd0 + 0.0), mass * (cdd1 + 0.0), mass * (cdd2 + g), ld0, ld1
 
 
-@njit
+@njit_nort
 def _world_acc(out, x, aw, ax, ay, az, g):
     """acc_W = R(q_att) acc - g e_z [m/s^2] (R from the normalised attitude, numpy's
     formula) into ``out``."""
@@ -612,7 +612,7 @@ def _world_acc(out, x, aw, ax, ay, az, g):
     out[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
 
 
-@njit
+@njit_nort
 def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
     """Move the corners ``pk`` to the world, ``tmp8`` = their height above ground [m];
     ``ctc`` (0/1) = corners in contact (the stance foot's corners, or with the kinematic
@@ -642,7 +642,7 @@ def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
             ctc[k] = 1 if (low or (foot and not (hm < ch) and tmp8[k] == hm)) else 0
 
 
-@njit
+@njit_nort
 def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
                  qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1):
     """Compliance prior + QP: the corner forces ``forces`` [N] (0 off contact, NaN if an
@@ -697,7 +697,7 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
             forces[cidx[c]] = qp_x[c]
 
 
-@njit
+@njit_nort
 def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
     """Write the output row ``y`` (:data:`OUT_COLUMNS`) and keep it in ``state``."""
     for k in range(8):
@@ -730,7 +730,7 @@ def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
     state[_S_N] += 1.0
 
 
-@njit
+@njit_nort(inline="always")
 def _unpack(cf, ci):
     nb, nj, nq, ns, order = ci[0], ci[1], ci[2], ci[3], ci[4]
     nbr = nb - 1
@@ -793,7 +793,7 @@ def _unpack(cf, ci):
     return prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites
 
 
-@njit
+@njit_nort
 def vfs_step(x, y, state, cf, ci, ws, iws):
     """One sample of the compiled virtual force sensor (callable from other ``@njit`` code).
 
@@ -821,7 +821,7 @@ def vfs_step(x, y, state, cf, ci, ws, iws):
                  filt_zi, tree, sites, ws, iws)
 
 
-@njit
+@njit_nort
 def vfs_run(X, Y, state, cf, ci, ws, iws):
     """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22) in one compiled
     loop (the batch path: the same step as streaming); returns the number of valid
