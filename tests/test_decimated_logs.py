@@ -74,7 +74,23 @@ def test_constant_run_must_beat_the_sensors_chance_repeats() -> None:
     smooth = [float(k) for k in range(400)]  # never repeats
     coarse = [float(k // 2) for k in range(400)]  # every value twice
     assert run_length(smooth) == 4  # p = 1/401: (1/401)^3 <= 1e-6 < (1/401)^2
-    assert run_length(coarse) == 21  # p = 201/401: 20 repeats
+    assert run_length(coarse) == 22  # p = 201/401: 21 repeats (p^20 = 1.001e-6 > 1e-6)
+
+
+def test_zeros_of_an_unloaded_cell_are_not_chance_repeats() -> None:
+    """A cell clipped at 0 N in swing repeats 0 for long stretches; only loaded readings
+    teach the chance of a repeat, so a frozen loaded reading is still found in 4."""
+    from grfguard.detect.residual_tests import constant_test
+    from grfguard.detect.sensor_state import SensorState
+
+    s = SensorState()
+    for cycle in range(4):
+        for _ in range(300):
+            constant_test(s, 0.0, False, 3, 1e-6)  # swing: clipped at zero
+        for k in range(100):
+            constant_test(s, 200.0 + k + cycle / 10, True, 3, 1e-6)  # stance: varies
+    hits = [constant_test(s, 250.0, True, 3, 1e-6) for _ in range(4)]
+    assert hits == [False, False, False, True]
 
 
 def test_frozen_time_is_in_seconds_and_legacy_counts_are_read_at_1_khz() -> None:

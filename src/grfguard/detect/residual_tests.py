@@ -46,21 +46,28 @@ def constant_test(
 
     With ``max_chance`` > 0 the run must also be one a healthy sensor makes with at most
     that probability: with ``p`` the sensor's own share of exact repeats among its
-    consecutive readings while unflagged (``(repeats + 1) / (pairs + 2)``, the run in
-    progress left out), ``n`` identical readings need ``p^(n-1) <= max_chance``. A
-    sensor whose readings never repeat (no quantisation) keeps ``p`` near 0 and
-    ``const_samples`` decides; a coarsely quantised one at a low rate needs a longer run.
+    consecutive loaded readings while unflagged (``(repeats + 1) / (pairs + 2)``, the
+    run in progress left out; unloaded readings are left out too, a cell clipped at zero
+    in swing repeats without telling anything about stance), ``n`` identical readings
+    need ``p^(n-1) <= max_chance``. A sensor whose readings never repeat (no
+    quantisation) keeps ``p`` near 0 and ``const_samples`` decides; a coarsely quantised
+    one at a low rate needs a longer run.
     """
     prev = s.last_reading_n
-    if x_n == prev:
+    same = x_n == prev
+    if same:
         s.repeats += 1
     else:
         if not s.flag:  # a run that ended unflagged: its repeats were chance repeats
-            s.chance_repeats += s.repeats
-            s.pairs += s.repeats + (1 if math.isfinite(prev) else 0)
+            s.pairs += s.run_pairs
+            s.chance_repeats += s.run_repeats
+        s.run_pairs = s.run_repeats = 0
         s.repeats = 0
         if s.flag and s.source == "const":
             s.varied = True
+    if loaded and math.isfinite(prev):
+        s.run_pairs += 1
+        s.run_repeats += same
     s.last_reading_n = x_n
     if s.repeats + 1 >= const_samples and loaded:
         if max_chance > 0.0:

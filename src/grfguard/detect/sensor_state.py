@@ -105,10 +105,12 @@ class SensorState:
     Attributes:
         last_reading_n: Previous finite reading [N] (NaN after a NaN).
         repeats: How many times in a row the reading repeated exactly.
-        pairs: Pairs of consecutive finite readings in runs that ended while unflagged
-            (never cleared).
+        pairs: Pairs of consecutive finite loaded readings in runs that ended while
+            unflagged (never cleared).
         chance_repeats: Of those, the exact repeats: a quantised healthy sensor's chance
             repeats (never cleared).
+        run_pairs, run_repeats: The same for the run in progress (committed when it
+            ends).
         swing_pos, swing_neg: Swing CUSUM sums [σ·samples].
         corner_pos, corner_neg: Corner CUSUM sums [σ·samples].
         flag: The sensor is flagged faulty.
@@ -128,8 +130,8 @@ class SensorState:
     """
 
     __slots__ = (
-        "last_reading_n", "repeats", "pairs", "chance_repeats", "swing_pos", "swing_neg",
-        "corner_pos", "corner_neg",
+        "last_reading_n", "repeats", "pairs", "chance_repeats", "run_pairs", "run_repeats",
+        "swing_pos", "swing_neg", "corner_pos", "corner_neg",
         "flag", "source", "kind", "flag_time_s", "last_alarm_s", "quiet_valid", "eta_n",
         "gain", "const_value_n", "varied", "const_returns", "swing", "stance",
     )
@@ -139,6 +141,8 @@ class SensorState:
         self.repeats = 0
         self.pairs = 0
         self.chance_repeats = 0
+        self.run_pairs = 0
+        self.run_repeats = 0
         self.swing_pos = self.swing_neg = 0.0
         self.corner_pos = self.corner_neg = 0.0
         self.clear()
