@@ -52,8 +52,9 @@ KIND_NAMES = ("none", "dropout", "saturation", "frozen", "stuck", "spikes", "noi
 (LAST, REP, SWP, SWN, CP, CN, FLAG, SRC, KIND, FT, LA, QV, ETA, GAIN, CV, VAR, CR,
  FN, FST, FSX, FSTT, FSTX, FSXX, FOUT,
  SN, SL, SR, SLL, SLR, SRR, SETA,
- HW, LREC, X1, X2, LP, SPIKE) = range(37)
-N_SS = 37
+ HW, LREC, X1, X2, LP, SPIKE,
+ PAIRS, CHREP, RPAIRS, RREP) = range(41)  # chance repeats of the constant test
+N_SS = 41
 # ---------------------------------------------------------------- global state (gs)
 G_LAST_T, G_WSUM, G_WN = 0, 1, 2
 G_CPREV, G_TD, G_LO, G_SWD, G_GUARD = 3, 5, 7, 9, 11  # two each (right, left)
@@ -69,8 +70,8 @@ N_GS = 30
  P_NOISESCAT, P_GAINCHG, P_GAINMIN, P_STETA, P_ROUNDTOL, P_CLRDROP, P_HOLD_SAT,
  P_CLRCONSTFRAC, P_CLRSPK, P_CLRVALID, P_NCLEAR, P_NCLEAR_SAT,
  P_AFAST, P_ALP, P_RGAINMIN, P_BLEND,
- P_FLO, P_FHI, P_SETTLE, P_GAPLIM) = range(51)
-N_PRM = 51
+ P_FLO, P_FHI, P_SETTLE, P_GAPLIM, P_CONSTCH) = range(52)
+N_PRM = 52
 #: Scratch floats :func:`detect_step` needs.
 N_WS_DETECT = 72
 
@@ -106,6 +107,7 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
     p[P_TOTSIG], p[P_TOTK], p[P_TOTH] = th.total_sigma, th.total_kappa, th.total_h
     p[P_CORSIG], p[P_CORK], p[P_CORH] = th.corner_sigma, th.corner_kappa, th.corner_h
     p[P_CONSTN] = tn.const_samples(th.const_s, dt)
+    p[P_CONSTCH] = min(0.5, th.false_alarm_rate_per_hour * dt / 3600.0 / 8)  # const_chance
     p[P_CLEVEL], p[P_CWFRAC] = tn.contact_level, tn.contact_weight_fraction
     p[P_GMINSW], p[P_GLOADSIG] = tn.guard_min_swing_fraction, tn.guard_load_sigma
     p[P_GMINSENS], p[P_OUTSIG] = tn.guard_min_sensors, tn.outlier_sigma
@@ -169,6 +171,7 @@ def reset_state(ss, gs):
         s[LREC] = 0.0
         s[X1] = s[X2] = s[LP] = _NAN
         s[SPIKE] = 0.0
+        s[PAIRS] = s[CHREP] = s[RPAIRS] = s[RREP] = 0.0
     gs[:] = 0.0
     gs[G_LAST_T] = _NAN
     _reset_timeline(gs)
@@ -389,20 +392,35 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
         s[LAST] = _NAN
         return SRC_NAN
     flagged = s[FLAG] != 0.0
-    # constant reading
-    if xi == s[LAST]:
+    # constant reading (``residual_tests.constant_test``, chance repeats included)
+    same = xi == s[LAST]
+    if same:
         s[REP] += 1.0
     else:
+        if not flagged:
+            s[PAIRS] += s[RPAIRS]
+            s[CHREP] += s[RREP]
+        s[RPAIRS] = 0.0
+        s[RREP] = 0.0
         s[REP] = 0.0
         if flagged and s[SRC] == SRC_CONST:
             s[VAR] = 1.0
+    if loaded_ok and math.isfinite(s[LAST]):
+        s[RPAIRS] += 1.0
+        if same:
+            s[RREP] += 1.0
     s[LAST] = xi
     alarm = SRC_NONE
     if s[REP] + 1.0 >= prm[P_CONSTN] and loaded_ok:
-        if flagged and s[SRC] == SRC_CONST and s[VAR] != 0.0 and xi == s[CV]:
-            s[CR] += 1.0
-            s[VAR] = 0.0
-        alarm = SRC_CONST
+        chance = False
+        if prm[P_CONSTCH] > 0.0:
+            pr = (s[CHREP] + 1.0) / (s[PAIRS] + 2.0)
+            chance = pr < 1.0 and s[REP] * math.log(pr) > math.log(prm[P_CONSTCH])
+        if not chance:
+            if flagged and s[SRC] == SRC_CONST and s[VAR] != 0.0 and xi == s[CV]:
+                s[CR] += 1.0
+                s[VAR] = 0.0
+            alarm = SRC_CONST
     if swing_ok:
         z = xi / prm[P_SIG]
         gp = s[SWP] + z - prm[P_SWK]
@@ -901,6 +919,8 @@ def sensor_states(ss: np.ndarray) -> list:
         s = SensorState()
         s.last_reading_n = float(row[LAST])
         s.repeats = int(row[REP])
+        s.pairs, s.chance_repeats = int(row[PAIRS]), int(row[CHREP])
+        s.run_pairs, s.run_repeats = int(row[RPAIRS]), int(row[RREP])
         s.swing_pos, s.swing_neg = float(row[SWP]), float(row[SWN])
         s.corner_pos, s.corner_neg = float(row[CP]), float(row[CN])
         s.flag = bool(row[FLAG])
