@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install lint bench clean
+.PHONY: demo test install lint bench bench-all clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -25,7 +25,16 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 
+# Speed benchmarks (not part of `make test`): pinned to one core when taskset exists; each
+# script rewrites its own BENCHMARKS.md section with machine information and the ratios to
+# the plain references timed in the same run. `make bench-all` runs every benchmark.
+BENCH_SPEED ?= benchmarks/bench_kernels.py benchmarks/bench_compiled_monitor.py
+PIN := $(shell command -v taskset >/dev/null 2>&1 && echo "taskset -c 1")
+
 bench: $(STAMP)
+	@for b in $(BENCH_SPEED); do echo "== $$b"; $(PIN) $(BIN)/python $$b --write || exit 1; done
+
+bench-all: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
 
 clean:

@@ -40,6 +40,17 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
 
 HEADER = "## Model self-calibration"
+READING = (
+    'Reading: the misses are the gains relative to each other (what is left is the '
+    '"twist" of each sole\'s four gains, front-inner and rear-outer against the other '
+    "two, which a flat-footed walk hardly excites; it also puts r2's recovered force "
+    'about 1 % of its load off, hence 5.1 N), the recovery without a weighed mass '
+    '(forces in load-cell units), and the per-corner threshold against the exact '
+    'model with a quiet IMU: the vibrating accelerometer is left out of the virtual '
+    'sensor, whose corner forces are then 2-3x noisier; against the exact model with '
+    'the same vibrating IMU it is within 2x. The IMU mounting includes the simulated '
+    'per-walk attitude bias (0.11 deg per axis, 1 sigma).'
+)
 PAPER_FAULTS = ("r1=frozen:0@5", "r2=offset:100@5", "r3=drift:15@5", "r4=offset:-100@5")
 #: Gaits of the other walks: (step length [m], step period [s]).
 GAITS = ((0.12, 1.0), (0.15, 0.8), (0.08, 1.2), (0.18, 1.0), (0.1, 0.9))
@@ -121,6 +132,8 @@ def paper_scenario(gap: RealityGap, corr, cfg) -> dict[str, dict[str, float]]:
             k_load = k0 + int(np.argmax(c[k0:]))
             row["delay_after_load_s"] = float(onset + m["delay_s"] - t[k_load])
         res[s] = row
+    res["all_false_alarms"] = {"n": float(sum(
+        (det[s].get("false_alarms") or 0) for s in SENSOR_NAMES))}
     res["healthy_false_alarms"] = {"n": float(sum(
         (det[s].get("false_alarms") or 0) for s in SENSOR_NAMES if s not in
         {p.split("=")[0] for p in PAPER_FAULTS}))}
@@ -151,6 +164,11 @@ def main() -> None:
     m_true = nominal.mass * (1 + truth["mass_error"])
     corr_m = estimate_corrections(cal, measured_mass_kg=m_true)
     e, e_m = errors(corr, truth, nominal), errors(corr_m, truth, nominal)
+    spread = []  # the IMU mounting error on other 60 s calibration walks of the robot
+    for seed in (2, 3):
+        other = simulate(gait=GaitConfig(duration=60.0), seed=seed, reality=gap)
+        spread.append(errors(estimate_corrections(other), other.attrs["reality"], nominal))
+        print(f"calibration walk seed {seed}: {spread[-1]}", flush=True)
     # monitoring with the weighed mass (the forces in newtons, not in load-cell units)
     th, cfg = thresholds_of(cal, corr_m)
     (c_x, t_x), (c_v, t_v), (c_g, t_g) = level(th_exact), level(th_vib), level(th)
@@ -187,8 +205,8 @@ def main() -> None:
         ("paper scenario: recovery RMSE offset r2 [N]", sc["r2"]["recovery_rmse_n"], 5.0),
         ("paper scenario: recovery RMSE offset r4 [N]", sc["r4"]["recovery_rmse_n"], 5.0),
         ("paper scenario: recovery RMSE drift r3 [N]", sc["r3"]["recovery_rmse_n"], 10.0),
-        ("paper scenario: healthy sensors' false alarms",
-         sc["healthy_false_alarms"]["n"], 0),
+        ("paper scenario: false alarms, all 8 sensors [episodes]",
+         sc["all_false_alarms"]["n"], 0),
         ("paper scenario without the measured mass: recovery RMSE r2 / r4 [N] (worst)",
          max(sc_nm["r2"]["recovery_rmse_n"], sc_nm["r4"]["recovery_rmse_n"]), 5.0),
         ("paper scenario without the measured mass: recovery RMSE drift r3 [N]",
@@ -224,6 +242,11 @@ def main() -> None:
     ]
     for name, v, lim in rows:
         lines.append(f"| {name} | {v:.3g} | {lim:g} | {ok(float(v), lim)} |")
+    lines += ["", "The same fit on two other 60 s calibration walks of the robot (seeds 2, 3): "
+              + "; ".join(f"IMU {x['imu_deg']:.2f} deg, CoM {x['com_cm']:.2f} cm, zeros "
+                          f"{x['zero_n']:.2f} N, gains {x['gain_pct']:.2f} %, weight "
+                          f"{x['weight_pct']:+.2f} %" for x in spread) + "."]
+    lines += ["", READING]
     lines += ["", "Other walks, healthy-sensor alarm episodes: " + "; ".join(fa_rows) + ".",
               "", f"Runtime {runtime:.0f} s on the shared 2-core machine.", ""]
     text = "\n".join(lines)

@@ -15,6 +15,16 @@ Three stages, each its own module, wired here (the only module that knows all th
 
 :class:`Monitor` streams (``update(row)``, never raises on a bad sample) and batches
 (``run(log)``: reset plus the same steps over the whole log, identical numbers).
+
+Compiled path (the default, ``compiled=True``): when the settings are covered (method
+``default``, no common-mode layer, no diagnostics, the compiled virtual sensor or
+precomputed ``vfs_*`` columns) the guards, virtual sensor, detector, recovery and
+standing layer run as one compiled step per sample (:mod:`grfguard.kernels.monitor`),
+with the same outputs as these Python stages (``tests/test_kernels_detect.py``);
+``update_array(x) -> y`` is that step with flat arrays (layouts in
+:attr:`Monitor.input_columns` / :attr:`Monitor.output_columns`), ``run`` one compiled
+loop over the log. :meth:`Monitor.compiled_reason` says why a monitor runs the Python
+stages instead.
 """
 
 from __future__ import annotations
@@ -62,6 +72,7 @@ __all__ = ["Monitor"]
 
 _NAN = float("nan")
 _UNSET = object()
+_F8 = np.dtype(np.float64)
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
@@ -630,14 +641,18 @@ class Monitor:
             LogFormatError: If ``x`` or ``y`` has the wrong length.
         """
         k = self._kernel()
+        if k is not None:
+            if y is None:
+                y = np.empty(k.sout)
+            # the compiled code does not check bounds: exact shapes and types only
+            if (x.__class__ is np.ndarray and y.__class__ is np.ndarray
+                    and x.shape == k.sin and y.shape == k.sout and x.dtype is _F8
+                    and y.dtype is _F8 and x.flags.c_contiguous and y.flags.c_contiguous):
+                return k.step(x, y)
         n_in = len(self.input_columns)
         n_out = len(self.output_columns)
         if y is None:
             y = np.empty(n_out)
-        if k is not None and type(x) is np.ndarray and x.shape == (n_in,) and \
-                x.dtype == np.float64 and x.flags.c_contiguous and y.shape == (n_out,) and \
-                y.dtype == np.float64 and y.flags.c_contiguous:
-            return k.step(x, y)
         x = np.ascontiguousarray(x, dtype=float).ravel()
         if x.shape != (n_in,) or y.shape != (n_out,):
             raise LogFormatError(

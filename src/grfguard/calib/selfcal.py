@@ -233,6 +233,8 @@ class ModelCorrections:
             f"{100 * self.trunk_com_y_m:+.1f}) cm, IMU mount roll {r[0]:+.2f} deg pitch "
             f"{r[1]:+.2f} deg, gyro bias {np.round(self.gyro_bias_rad_s, 4).tolist()} rad/s, "
             f"gains {g.min():.3f}-{g.max():.3f}, zeros {z.min():+.1f}..{z.max():+.1f} N, "
+            f"encoder offsets up to {max(map(abs, self.encoder_offset_deg.values())):.2f} "
+            "deg, "
             f"accelerometer vibration {self.acc_vibration_rms_m_s2:.2f} m/s^2 RMS > 10 Hz"
             + ("" if self.use_accelerometer else " (left out of the virtual sensor)")
         )
@@ -722,7 +724,8 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
 def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     """``config`` (a :class:`~grfguard.detect.MonitorConfig`, None for the default) with
     the virtual sensor settings the corrections call for: the accelerometer left out of
-    the fusion when it vibrated in the calibration data (``corr.use_accelerometer``).
+    the multibody estimator's fusion when it vibrated in the calibration data
+    (``corr.use_accelerometer``).
     Unchanged when ``corr`` is None or the accelerometer was quiet."""
     from grfguard.detect import MonitorConfig
     from grfguard.estimate.vfs import VFSConfig
@@ -731,4 +734,6 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     if corr is None or corr.use_accelerometer:
         return cfg
     vfs = cfg.vfs if cfg.vfs is not None else VFSConfig()
+    if vfs.com_method != "multibody":  # the paper's LIPM filter: nothing to switch
+        return cfg
     return cfg.replace(vfs=dataclasses.replace(vfs, use_accelerometer=False))

@@ -47,8 +47,9 @@ class MonitorConfig:
         init_s: Initialisation window of the paper's observer [s].
         diagnostics: Also output the test statistics (``stat_*`` and ``res_*`` columns).
         compiled: ``Monitor.for_log`` runs the compiled virtual force sensor
-            (:mod:`grfguard.kernels`) when it covers the VFS settings; False keeps the
-            pure-Python sensor.
+            (:mod:`grfguard.kernels`) when it covers the VFS settings, and the monitor its
+            compiled guards, detector, recovery and standing layer when it covers the
+            settings (``Monitor.compiled_reason``); False keeps the pure-Python stages.
     """
 
     method: str = "default"

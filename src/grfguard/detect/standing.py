@@ -29,16 +29,17 @@ from __future__ import annotations
 import math
 from collections.abc import MutableMapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from grfguard._validate import check_number
 from grfguard.model.robot import SENSOR_NAMES
 
-__all__ = ["StandingConfig", "StandingDetector", "StandingStage"]
+__all__ = ["StandEnd", "StandingConfig", "StandingDetector", "StandingStage"]
 
 _N = 8
+_NAN = float("nan")
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _ETA_COLS = tuple(f"eta_{s}" for s in SENSOR_NAMES)
@@ -93,8 +94,31 @@ class StandingConfig:
         check_number(o, "hold_filter_s", self.hold_filter_s, 0.0, 60.0, "s")
 
 
+class StandEnd(NamedTuple):
+    """What a stand with flagged sensors left behind when it ended (per sensor, (8,)).
+
+    Attributes:
+        flags: Flagged at the end.
+        kinds: Their kinds.
+        eta_n: Deviations from the baselines [N].
+        baseline_n: Residual baselines of the stand [N].
+        level_n: Low-passed readings [N].
+    """
+
+    flags: tuple[bool, ...]
+    kinds: tuple[str, ...]
+    eta_n: tuple[float, ...]
+    baseline_n: tuple[float, ...]
+    level_n: tuple[float, ...]
+
+
 class StandingDetector:
     """Per-sensor detection of additive faults during a double-support stand.
+
+    Plain floats per sample (eight sensors: small numpy arrays would cost more than the
+    arithmetic). ``flags`` ((8,) bool array), ``kinds`` and ``eta_n`` ((8,) [N]) are the
+    current verdicts; ``ended`` is the :class:`StandEnd` of the last stand that ended
+    with flagged sensors (None otherwise; the caller may clear it).
 
     Args:
         dt_s: Sampling period in [s].
@@ -106,36 +130,52 @@ class StandingDetector:
         self.config = config if config is not None else StandingConfig()
         self._a = (1.0 if self.config.filter_s <= 0
                    else 1.0 - math.exp(-self.dt_s / self.config.filter_s))
+        self.ended: StandEnd | None = None
         self.reset()
 
     def reset(self) -> None:
-        """Forget the stand."""
-        self._ds_s = 0.0
-        self._base_sum = np.zeros(_N)
-        self._base_n = 0
-        self._base: np.ndarray | None = None
-        self._tot_sum = np.zeros(2)
-        self._tot_n = 0
-        self._tot_base: np.ndarray | None = None
-        self._lp = np.full(_N, np.nan)
-        self._xlp = np.full(_N, np.nan)
-        self._over_s = np.zeros(_N)
-        self._quiet_s = np.zeros(_N)
-        self._half_t = np.full(_N, np.nan)
+        """Forget the stand (and ``ended``)."""
+        self._new_stand()
         self._t = 0.0
+        self.ended = None
+
+    def _new_stand(self) -> None:
+        """End the current stand (``ended`` records its flags, if any)."""
+        if getattr(self, "_any", False):
+            self.ended = StandEnd(tuple(self._flags), tuple(self.kinds), tuple(self._eta),
+                                  tuple(self._base or [_NAN] * _N), tuple(self._xlp))
+        self._ds_s = 0.0
+        self._base_sum = [0.0] * _N
+        self._base_n = 0
+        self._base: list[float] | None = None
+        self._tot_sum = [0.0, 0.0]
+        self._tot_n = 0
+        self._tot_base: list[float] | None = None
+        self._lp = [_NAN] * _N
+        self._xlp = [_NAN] * _N
+        self._over_s = [0.0] * _N
+        self._quiet_s = [0.0] * _N
+        self._half_t = [_NAN] * _N
+        self._flags = [False] * _N
+        self._eta = [0.0] * _N
+        self._any = False
         self.flags = np.zeros(_N, dtype=bool)
         self.kinds = ["none"] * _N
-        self.eta_n = np.zeros(_N)
+
+    @property
+    def eta_n(self) -> np.ndarray:
+        """(8,) deviation of each flagged sensor from its baseline [N] (0 when not flagged)."""
+        return np.array(self._eta)
 
     @property
     def baseline_n(self) -> np.ndarray:
         """(8,) residual baselines of the stand [N] (NaN before they are learnt)."""
-        return self._base.copy() if self._base is not None else np.full(_N, np.nan)
+        return np.array(self._base if self._base is not None else [_NAN] * _N)
 
     @property
     def level_n(self) -> np.ndarray:
         """(8,) low-passed readings [N] (NaN outside a stand)."""
-        return self._xlp.copy()
+        return np.array(self._xlp)
 
     @property
     def standing(self) -> bool:
@@ -145,19 +185,21 @@ class StandingDetector:
     def _shifted(self, totals: Sequence[float] | None) -> bool:
         """The feet's virtual forces moved away from their baseline values (a weight
         shift); learns those values while the residual baselines are learnt."""
-        if totals is None:
+        if totals is None or len(totals) != 2:
             return False
-        tot = np.asarray(totals, dtype=float)
-        if tot.shape != (2,) or not np.isfinite(tot).all():
+        t0, t1 = float(totals[0]), float(totals[1])
+        if not (math.isfinite(t0) and math.isfinite(t1)):
             return False
         if self._base is None:
-            self._tot_sum += tot
+            self._tot_sum[0] += t0
+            self._tot_sum[1] += t1
             self._tot_n += 1
             return False
-        if self._tot_base is None:
+        tb = self._tot_base
+        if tb is None:
             return False
-        lim = self.config.max_shift_fraction * abs(float(self._tot_base.sum()))
-        return bool(np.abs(tot - self._tot_base).max() > lim)
+        lim = self.config.max_shift_fraction * abs(tb[0] + tb[1])
+        return abs(t0 - tb[0]) > lim or abs(t1 - tb[1]) > lim
 
     def update(
         self,
@@ -180,63 +222,98 @@ class StandingDetector:
             ``(flags (8,) bool, kinds)``; never raises on bad numbers.
         """
         c = self.config
-        self._t += self.dt_s
+        dt = self.dt_s
+        self._t += dt
         if not double_support:
             if self._ds_s > 0:
-                self.reset()
+                self._new_stand()
             return self.flags, self.kinds
-        d = np.asarray(measured, dtype=float) - np.asarray(vfs, dtype=float)
-        if d.shape != (_N,):
+        try:
+            xm = [float(q) for q in measured]
+            d = [a - float(b) for a, b in zip(xm, vfs, strict=True)]
+        except (TypeError, ValueError):
+            return self.flags, self.kinds
+        if len(d) != _N:
             return self.flags, self.kinds
         if self._base is not None and self._shifted(totals):
-            self.reset()  # a new stand begins now
-        self._ds_s += self.dt_s
-        fin = np.isfinite(d)
-        first = ~np.isfinite(self._lp) & fin
-        self._lp[first] = d[first]
-        upd = fin & ~first
-        self._lp[upd] += self._a * (d[upd] - self._lp[upd])
-        xm = np.asarray(measured, dtype=float)
-        self._xlp[first] = xm[first]
-        self._xlp[upd] += self._a * (xm[upd] - self._xlp[upd])
+            self._new_stand()  # a new stand begins now
+        self._ds_s += dt
+        a = self._a
+        lp, xl = self._lp, self._xlp
+        fin_all = True
+        for i in range(_N):
+            di = d[i]
+            if not math.isfinite(di):
+                fin_all = False
+            elif lp[i] != lp[i]:  # first finite sample
+                lp[i] = di
+                xl[i] = xm[i]
+            else:
+                lp[i] += a * (di - lp[i])
+                xl[i] += a * (xm[i] - xl[i])
         if self._ds_s < c.settle_s:
             return self.flags, self.kinds
         if self._base is None:
-            if fin.all():
-                self._base_sum += d
+            if fin_all:
+                bs = self._base_sum
+                for i in range(_N):
+                    bs[i] += d[i]
                 self._base_n += 1
                 self._shifted(totals)
-            if self._base_n * self.dt_s >= c.baseline_s:
-                self._base = self._base_sum / self._base_n
+            if self._base_n * dt >= c.baseline_s:
+                self._base = [q / self._base_n for q in self._base_sum]
                 if self._tot_n:
-                    self._tot_base = self._tot_sum / self._tot_n
+                    self._tot_base = [q / self._tot_n for q in self._tot_sum]
             return self.flags, self.kinds
-        dev_s = np.where(np.isfinite(self._lp), self._lp - self._base, 0.0)
-        dev = np.abs(dev_s)
-        # median of the other seven deviations: the 4th or 5th smallest of all eight
-        order = np.sort(dev)
-        med_others = np.where(dev <= order[3], order[4], order[3])
-        half = (dev > 0.5 * c.threshold_n) & ~np.isfinite(self._half_t)
-        self._half_t[half] = self._t
-        self._half_t[(dev < 0.25 * c.threshold_n) & ~self.flags] = np.nan
-        over = (dev > c.threshold_n) & (dev > c.isolation_ratio * med_others) & ~self.flags
-        self._over_s = np.where(over, self._over_s + self.dt_s, 0.0)
-        new = np.flatnonzero((self._over_s >= c.persist_s) & ~self.flags)
-        for i in new:
-            self.flags[i] = True
-            rise = self._t - self._half_t[i]
-            self.kinds[i] = "drift" if rise > c.drift_rise_s else "offset"
-        quiet = self.flags & (dev < 0.5 * c.threshold_n)
-        self._quiet_s = np.where(quiet, self._quiet_s + self.dt_s, 0.0)
-        gone = self.flags & (self._quiet_s >= c.clear_s)
-        if gone.any():
-            self.flags[gone] = False
-            for i in np.flatnonzero(gone):
-                self.kinds[i] = "none"
-            self._quiet_s[gone] = 0.0
-            self._half_t[gone] = np.nan
-        self.eta_n = np.where(self.flags, dev_s, 0.0)
+        self._monitor(lp)
         return self.flags, self.kinds
+
+    def _monitor(self, lp: list[float]) -> None:
+        """Deviations from the baselines, flags, kinds, clearing (one sample)."""
+        c = self.config
+        dt, t, thr = self.dt_s, self._t, c.threshold_n
+        base = self._base
+        assert base is not None
+        dev_s = [q - b if q == q else 0.0 for q, b in zip(lp, base, strict=True)]
+        dev = [abs(q) for q in dev_s]
+        order = sorted(dev)
+        o3, o4 = order[3], order[4]  # the median of the other seven is one of these
+        flags, half_t = self._flags, self._half_t
+        changed = False
+        for i in range(_N):
+            di = dev[i]
+            if not flags[i]:
+                if di > 0.5 * thr:
+                    if half_t[i] != half_t[i]:
+                        half_t[i] = t
+                elif di < 0.25 * thr:
+                    half_t[i] = _NAN
+                med = o4 if di <= o3 else o3
+                if di > thr and di > c.isolation_ratio * med:
+                    self._over_s[i] += dt
+                    if self._over_s[i] >= c.persist_s:
+                        flags[i] = True
+                        self.kinds[i] = ("drift" if t - half_t[i] > c.drift_rise_s
+                                         else "offset")
+                        self._quiet_s[i] = 0.0
+                        changed = True
+                else:
+                    self._over_s[i] = 0.0
+            else:
+                self._over_s[i] = 0.0
+                self._quiet_s[i] = self._quiet_s[i] + dt if di < 0.5 * thr else 0.0
+                if self._quiet_s[i] >= c.clear_s:  # the fault went away
+                    flags[i] = False
+                    self.kinds[i] = "none"
+                    self._quiet_s[i] = 0.0
+                    half_t[i] = _NAN
+                    self._eta[i] = 0.0
+                    changed = True
+            if flags[i]:
+                self._eta[i] = dev_s[i]
+        if changed:
+            self.flags = np.array(flags, dtype=bool)
+            self._any = any(flags)
 
 
 def _contact(cref: float, cest: float) -> bool:
@@ -285,6 +362,7 @@ class StandingStage:
         self._e_off = [0.0] * _N
         self._e_gain = [0.0] * _N
         self._stage = [0] * _N  # 0: wait own swing, 1: wait other swing after it
+        self._any_held = False
         self._prev = [True, True]
         self._lifted = [False, False]
 
@@ -333,46 +411,52 @@ class StandingStage:
         """
         contact = [_contact(cref[f], cest[f]) for f in range(2)]
         det = self.detector
-        was = det.flags.copy()
-        kinds_before = list(det.kinds)
-        eta_before = det.eta_n.copy()
-        base_before = det.baseline_n
-        level_before = det.level_n
-        flags, kinds = det.update(x, v, contact[0] and contact[1], tot)
+        det.update(x, v, contact[0] and contact[1], tot)
         done = self._swings(contact)
+        end = det.ended
+        if end is not None:  # a stand with flagged sensors ended: hold them
+            det.ended = None
+            self._hold(end)
+        flags = det._flags
+        if not (det._any or self._any_held):
+            return
         for i in range(_N):
-            if was[i] and not det.standing and not flags[i]:  # the stand ended: hold
-                self.held[i] = True
-                self.held_kind[i] = kinds_before[i]
-                self.held_eta[i] = float(eta_before[i])
-                load = float(level_before[i] - eta_before[i])
-                self.held_gain[i] = (float(level_before[i]) / load
-                                     if load > det.config.threshold_n else math.nan)
-                self.held_ref[i] = float(base_before[i]) if math.isfinite(
-                    base_before[i]) else 0.0
-                self._e_off[i] = self._e_gain[i] = 0.0
-                self._stage[i] = 0
-        for i in range(_N):
-            flagged = bool(out.get(_FLAG_COLS[i], False))
-            if flagged:  # the per-sensor detector has its own verdict
+            if not (flags[i] or self.held[i]):
+                continue
+            if out.get(_FLAG_COLS[i], False):  # the per-sensor detector has its own verdict
                 self.held[i] = False
                 continue
-            f = i // 4
-            if self.held[i] and not flags[i]:
+            xi = float(x[i])
+            if flags[i]:
+                self.held[i] = False
+                kind, eta = det.kinds[i], det._eta[i]
+            else:
+                f = i // 4
                 if self._stage[i] == 0 and done[f]:
                     self._stage[i] = 1
                 elif self._stage[i] == 1 and done[1 - f]:
                     self.held[i] = False
                     continue
-            if flags[i]:
-                self.held[i] = False
-                kind, eta = kinds[i], float(det.eta_n[i])
-            elif self.held[i]:
-                kind, eta = self._held(i, float(x[i]), float(v[i]))
-            else:
-                continue
+                kind, eta = self._held(i, xi, float(v[i]))
             out[_FLAG_COLS[i]] = True
             out[_KIND_COLS[i]] = kind
             out[_ETA_COLS[i]] = eta
-            xi = float(x[i])
-            out[_REC_COLS[i]] = xi - eta if math.isfinite(xi) else float("nan")
+            out[_REC_COLS[i]] = xi - eta if math.isfinite(xi) else _NAN
+        self._any_held = any(self.held)
+
+    def _hold(self, end: StandEnd) -> None:
+        """Hold the flags of a stand that ended."""
+        thr = self.detector.config.threshold_n
+        for i in range(_N):
+            if not end.flags[i]:
+                continue
+            self.held[i] = True
+            self.held_kind[i] = end.kinds[i]
+            eta, level, base = end.eta_n[i], end.level_n[i], end.baseline_n[i]
+            self.held_eta[i] = eta
+            load = level - eta
+            self.held_gain[i] = level / load if load > thr else _NAN
+            self.held_ref[i] = base if math.isfinite(base) else 0.0
+            self._e_off[i] = self._e_gain[i] = 0.0
+            self._stage[i] = 0
+        self._any_held = any(self.held)

@@ -257,10 +257,10 @@ class VirtualForceSensor:
         Raises:
             ConfigError: The kernel does not cover the settings.
         """
-        from grfguard.kernels.vfs import VFSKernel
-
         key = (has_gyro, has_ref)
         if key not in self._kern:
+            from grfguard.kernels.vfs import VFSKernel  # (here: an import costs ~1 us/call)
+
             self._kern[key] = VFSKernel(self, has_gyro=has_gyro, has_ref=has_ref)
         return self._kern[key]
 

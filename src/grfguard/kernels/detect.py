@@ -52,8 +52,7 @@ KIND_NAMES = ("none", "dropout", "saturation", "frozen", "stuck", "spikes", "noi
 (LAST, REP, SWP, SWN, CP, CN, FLAG, SRC, KIND, FT, LA, QV, ETA, GAIN, CV, VAR, CR,
  FN, FST, FSX, FSTT, FSTX, FSXX, FOUT,
  SN, SL, SR, SLL, SLR, SRR, SETA,
- HW, LREC, X1, X2, LP, SPIKE,
- PAIRS, CHREP, RPAIRS, RREP) = range(41)  # chance repeats of the constant test
+ HW, LREC, X1, X2, LP, SPIKE, PAIRS, CHANCE, RUNP, RUNR) = range(41)
 N_SS = 41
 # ---------------------------------------------------------------- global state (gs)
 G_LAST_T, G_WSUM, G_WN = 0, 1, 2
@@ -70,7 +69,7 @@ N_GS = 30
  P_NOISESCAT, P_GAINCHG, P_GAINMIN, P_STETA, P_ROUNDTOL, P_CLRDROP, P_HOLD_SAT,
  P_CLRCONSTFRAC, P_CLRSPK, P_CLRVALID, P_NCLEAR, P_NCLEAR_SAT,
  P_AFAST, P_ALP, P_RGAINMIN, P_BLEND,
- P_FLO, P_FHI, P_SETTLE, P_GAPLIM, P_CONSTCH) = range(52)
+ P_FLO, P_FHI, P_SETTLE, P_GAPLIM, P_CHANCE) = range(52)
 N_PRM = 52
 #: Scratch floats :func:`detect_step` needs.
 N_WS_DETECT = 72
@@ -107,7 +106,7 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
     p[P_TOTSIG], p[P_TOTK], p[P_TOTH] = th.total_sigma, th.total_kappa, th.total_h
     p[P_CORSIG], p[P_CORK], p[P_CORH] = th.corner_sigma, th.corner_kappa, th.corner_h
     p[P_CONSTN] = tn.const_samples(th.const_s, dt)
-    p[P_CONSTCH] = min(0.5, th.false_alarm_rate_per_hour * dt / 3600.0 / 8)  # const_chance
+    p[P_CHANCE] = min(0.5, th.false_alarm_rate_per_hour * c.dt_s / 3600.0 / 8)
     p[P_CLEVEL], p[P_CWFRAC] = tn.contact_level, tn.contact_weight_fraction
     p[P_GMINSW], p[P_GLOADSIG] = tn.guard_min_swing_fraction, tn.guard_load_sigma
     p[P_GMINSENS], p[P_OUTSIG] = tn.guard_min_sensors, tn.outlier_sigma
@@ -171,7 +170,10 @@ def reset_state(ss, gs):
         s[LREC] = 0.0
         s[X1] = s[X2] = s[LP] = _NAN
         s[SPIKE] = 0.0
-        s[PAIRS] = s[CHREP] = s[RPAIRS] = s[RREP] = 0.0
+        s[PAIRS] = 0.0
+        s[CHANCE] = 0.0
+        s[RUNP] = 0.0
+        s[RUNR] = 0.0
     gs[:] = 0.0
     gs[G_LAST_T] = _NAN
     _reset_timeline(gs)
@@ -392,30 +394,31 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
         s[LAST] = _NAN
         return SRC_NAN
     flagged = s[FLAG] != 0.0
-    # constant reading (``residual_tests.constant_test``, chance repeats included)
-    same = xi == s[LAST]
+    # constant reading (residual_tests.constant_test)
+    prev = s[LAST]
+    same = xi == prev
     if same:
         s[REP] += 1.0
     else:
-        if not flagged:
-            s[PAIRS] += s[RPAIRS]
-            s[CHREP] += s[RREP]
-        s[RPAIRS] = 0.0
-        s[RREP] = 0.0
+        if not flagged:  # a run that ended unflagged: its repeats were chance repeats
+            s[PAIRS] += s[RUNP]
+            s[CHANCE] += s[RUNR]
+        s[RUNP] = 0.0
+        s[RUNR] = 0.0
         s[REP] = 0.0
         if flagged and s[SRC] == SRC_CONST:
             s[VAR] = 1.0
-    if loaded_ok and math.isfinite(s[LAST]):
-        s[RPAIRS] += 1.0
-        if same:
-            s[RREP] += 1.0
+    if loaded_ok and math.isfinite(prev):  # chance repeats: loaded readings only
+        s[RUNP] += 1.0
+        s[RUNR] += 1.0 if same else 0.0
     s[LAST] = xi
     alarm = SRC_NONE
     if s[REP] + 1.0 >= prm[P_CONSTN] and loaded_ok:
         chance = False
-        if prm[P_CONSTCH] > 0.0:
-            pr = (s[CHREP] + 1.0) / (s[PAIRS] + 2.0)
-            chance = pr < 1.0 and s[REP] * math.log(pr) > math.log(prm[P_CONSTCH])
+        mc = prm[P_CHANCE]
+        if mc > 0.0:
+            p = (s[CHANCE] + 1.0) / (s[PAIRS] + 2.0)
+            chance = p < 1.0 and s[REP] * math.log(p) > math.log(mc)
         if not chance:
             if flagged and s[SRC] == SRC_CONST and s[VAR] != 0.0 and xi == s[CV]:
                 s[CR] += 1.0
@@ -919,8 +922,8 @@ def sensor_states(ss: np.ndarray) -> list:
         s = SensorState()
         s.last_reading_n = float(row[LAST])
         s.repeats = int(row[REP])
-        s.pairs, s.chance_repeats = int(row[PAIRS]), int(row[CHREP])
-        s.run_pairs, s.run_repeats = int(row[RPAIRS]), int(row[RREP])
+        s.pairs, s.chance_repeats = int(row[PAIRS]), int(row[CHANCE])
+        s.run_pairs, s.run_repeats = int(row[RUNP]), int(row[RUNR])
         s.swing_pos, s.swing_neg = float(row[SWP]), float(row[SWN])
         s.corner_pos, s.corner_neg = float(row[CP]), float(row[CN])
         s.flag = bool(row[FLAG])

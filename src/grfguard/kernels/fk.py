@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grfguard.errors import ConfigError
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import borrow, njit, njit_nort, view1d, view2d
 
 __all__ = ["TreeModel", "fk_tree", "fk_sites", "fk_batch", "N_WORK", "FREE", "BALL", "SLIDE",
            "HINGE"]
@@ -53,6 +53,9 @@ class TreeModel:
     site_sameframe: np.ndarray  # (ns,) int64
     site_pos: np.ndarray  # (ns, 3)
     site_quat: np.ndarray  # (ns, 4)
+    #: Bodies 1..nb-1 by depth in the tree (parents first; the branches of one depth next
+    #: to each other, so the CPU overlaps the legs' dependency chains).
+    body_order: np.ndarray  # (nb - 1,) int64
 
     @classmethod
     def from_mujoco(cls, model) -> TreeModel:
@@ -74,8 +77,13 @@ class TreeModel:
         def f64(x, k):
             return np.ascontiguousarray(np.asarray(x, dtype=np.float64)).reshape(-1, k)
 
+        parent = i64(m.body_parentid)
+        depth = np.zeros(parent.shape[0], np.int64)
+        for i in range(1, parent.shape[0]):
+            depth[i] = depth[parent[i]] + 1
+        order = np.argsort(depth[1:], kind="stable").astype(np.int64) + 1
         return cls(
-            body_parent=i64(m.body_parentid),
+            body_parent=parent,
             body_jntadr=i64(m.body_jntadr),
             body_jntnum=i64(m.body_jntnum),
             body_sameframe=i64(m.body_sameframe),
@@ -93,6 +101,7 @@ class TreeModel:
             site_sameframe=i64(m.site_sameframe),
             site_pos=f64(m.site_pos, 3),
             site_quat=f64(m.site_quat, 4),
+            body_order=np.ascontiguousarray(order),
         )
 
     @property
@@ -109,6 +118,7 @@ class TreeModel:
             self.body_parent, self.body_jntadr, self.body_jntnum, self.body_sameframe,
             self.body_pos, self.body_quat, self.body_ipos, self.body_iquat, self.body_mass,
             self.jnt_type, self.jnt_qposadr, self.jnt_axis, self.jnt_pos, self.qpos0,
+            self.body_order,
         )
 
     def new_frames(self) -> tuple[np.ndarray, ...]:
@@ -124,7 +134,7 @@ class TreeModel:
 # Scalar helpers (no array views: nothing to reference-count, everything stays in
 # registers); the operation order is MuJoCo's, so results are bit-equal where MuJoCo's
 # build does not fuse differently.
-@njit(inline="always")
+@njit_nort(inline="always")
 def _nq(q0, q1, q2, q3):
     """mju_normalize4: unit quaternion (identity below 1e-15; unchanged within 1e-15)."""
     n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
@@ -136,7 +146,7 @@ def _nq(q0, q1, q2, q3):
     return q0, q1, q2, q3
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _mq(a0, a1, a2, a3, b0, b1, b2, b3):
     """mju_mulQuat."""
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
@@ -145,7 +155,7 @@ def _mq(a0, a1, a2, a3, b0, b1, b2, b3):
             a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _rv(v0, v1, v2, q0, q1, q2, q3):
     """mju_rotVecQuat."""
     if v0 == 0 and v1 == 0 and v2 == 0:
@@ -159,20 +169,11 @@ def _rv(v0, v1, v2, q0, q1, q2, q3):
             v2 + 2 * (q1 * t1 - q2 * t0))
 
 
-@njit(inline="always")
-def _q2m(m, i, q0, q1, q2, q3):
-    """mju_quat2Mat into row ``i`` of ``m`` (n, 9)."""
+@njit_nort(inline="always")
+def _q2m(q0, q1, q2, q3):
+    """mju_quat2Mat (row-major 9-tuple)."""
     if q0 == 1 and q1 == 0 and q2 == 0 and q3 == 0:
-        m[i, 0] = 1.0
-        m[i, 1] = 0.0
-        m[i, 2] = 0.0
-        m[i, 3] = 0.0
-        m[i, 4] = 1.0
-        m[i, 5] = 0.0
-        m[i, 6] = 0.0
-        m[i, 7] = 0.0
-        m[i, 8] = 1.0
-        return
+        return 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
     q00 = q0 * q0
     q01 = q0 * q1
     q02 = q0 * q2
@@ -184,68 +185,69 @@ def _q2m(m, i, q0, q1, q2, q3):
     q23 = q2 * q3
     q33 = q3 * q3
     # the association order MuJoCo's build uses (measured bit-equal on mujoco 4.0.0)
-    m[i, 0] = (q00 - q22) + (q11 - q33)
-    m[i, 4] = (q00 + q22) - (q11 + q33)
-    m[i, 8] = (q00 - q22) - (q11 - q33)
-    m[i, 1] = 2 * (q12 - q03)
-    m[i, 2] = 2 * (q13 + q02)
-    m[i, 3] = 2 * (q12 + q03)
-    m[i, 5] = 2 * (q23 - q01)
-    m[i, 6] = 2 * (q13 - q02)
-    m[i, 7] = 2 * (q23 + q01)
+    return ((q00 - q22) + (q11 - q33), 2 * (q12 - q03), 2 * (q13 + q02),
+            2 * (q12 + q03), (q00 + q22) - (q11 + q33), 2 * (q23 - q01),
+            2 * (q13 - q02), 2 * (q23 + q01), (q00 - q22) - (q11 - q33))
 
 
-@njit(inline="always")
-def _mv(m, i, v0, v1, v2):
-    """mju_mulMatVec3 with row ``i`` of ``m`` (n, 9)."""
-    return (m[i, 0] * v0 + m[i, 1] * v1 + m[i, 2] * v2,
-            m[i, 3] * v0 + m[i, 4] * v1 + m[i, 5] * v2,
-            m[i, 6] * v0 + m[i, 7] * v1 + m[i, 8] * v2)
+@njit_nort(inline="always")
+def _mv(m0, m1, m2, m3, m4, m5, m6, m7, m8, v0, v1, v2):
+    """mju_mulMatVec3 (row-major matrix entries)."""
+    return (m0 * v0 + m1 * v1 + m2 * v2,
+            m3 * v0 + m4 * v1 + m5 * v2,
+            m6 * v0 + m7 * v1 + m8 * v2)
 
 
-@njit(inline="always")
-def _l2g(opos, omat, o, pos, quat, s, body, sameframe, xpos, xquat, xmat, xipos, ximat):
-    """mj_local2Global: frame ``s`` of ``pos``/``quat`` on ``body`` into row ``o`` of
-    ``opos``/``omat`` (sameframe: 0 none, 1 body, 2 inertia, 3 body rot., 4 inertia rot.)."""
-    if sameframe == 0 or sameframe == 3 or sameframe == 4:
-        v0, v1, v2 = _mv(xmat, body, pos[s, 0], pos[s, 1], pos[s, 2])
-        opos[o, 0] = v0 + xpos[body, 0]
-        opos[o, 1] = v1 + xpos[body, 1]
-        opos[o, 2] = v2 + xpos[body, 2]
-    elif sameframe == 1:
-        for k in range(3):
-            opos[o, k] = xpos[body, k]
-    else:
-        for k in range(3):
-            opos[o, k] = xipos[body, k]
-    if sameframe == 0:
-        q0, q1, q2, q3 = _mq(xquat[body, 0], xquat[body, 1], xquat[body, 2], xquat[body, 3],
-                             quat[s, 0], quat[s, 1], quat[s, 2], quat[s, 3])
-        _q2m(omat, o, q0, q1, q2, q3)
-    elif sameframe == 1 or sameframe == 3:
-        for k in range(9):
-            omat[o, k] = xmat[body, k]
-    else:
-        for k in range(9):
-            omat[o, k] = ximat[body, k]
+# mj_local2Global (sameframe: 0 none, 1 body, 2 inertia, 3 body rotation, 4 inertia
+# rotation) is written out in _inertial_frames and fk_sites: a call per body with a
+# dozen array arguments costs more than the arithmetic.
+@njit_nort
+def _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat):
+    """``xipos``/``ximat`` of bodies 1.. from their inertial frames (sameframe 2 / 4, the
+    inertial frame relative to itself, leaves them as they are)."""
+    for i in range(1, body_sameframe.shape[0]):
+        sf = body_sameframe[i]
+        if sf == 0 or sf == 3 or sf == 4:
+            v0, v1, v2 = _mv(xmat[i, 0], xmat[i, 1], xmat[i, 2], xmat[i, 3], xmat[i, 4],
+                             xmat[i, 5], xmat[i, 6], xmat[i, 7], xmat[i, 8],
+                             body_ipos[i, 0], body_ipos[i, 1], body_ipos[i, 2])
+            xipos[i, 0] = v0 + xpos[i, 0]
+            xipos[i, 1] = v1 + xpos[i, 1]
+            xipos[i, 2] = v2 + xpos[i, 2]
+        elif sf == 1:
+            for k in range(3):
+                xipos[i, k] = xpos[i, k]
+        if sf == 0:
+            q0, q1, q2, q3 = _mq(xquat[i, 0], xquat[i, 1], xquat[i, 2], xquat[i, 3],
+                                 body_iquat[i, 0], body_iquat[i, 1], body_iquat[i, 2],
+                                 body_iquat[i, 3])
+            r = _q2m(q0, q1, q2, q3)
+            for k in range(9):
+                ximat[i, k] = r[k]
+        elif sf == 1 or sf == 3:
+            for k in range(9):
+                ximat[i, k] = xmat[i, k]
 
 
-@njit
+@njit_nort
 def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
             body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
-            jnt_pos, qpos0, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com, mass_subtree,
-            work):
+            jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com,
+            mass_subtree, work):
     """``mj_kinematics`` (bodies and inertial frames) and the subtree CoM of ``mj_comPos``.
 
     ``qpos`` is a work copy of ``qpos_in`` (its free/ball quaternions get normalised);
     outputs ``xpos (nb, 3)``, ``xquat (nb, 4)``, ``xmat (nb, 9)``, ``xipos (nb, 3)``,
     ``ximat (nb, 9)``, ``subtree_com (nb, 3)`` [m], work ``mass_subtree (nb,)``; ``work``
-    is unused (kept for the signature). No allocation.
+    is unused (kept for the signature). Bodies are visited in ``body_order`` (parents
+    first); each body's arithmetic is MuJoCo's, so the order does not change a bit. No
+    allocation.
     """
     nb = body_parent.shape[0]
     _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
     _world_frame(xpos, xquat, xmat, xipos, ximat)
-    for i in range(1, nb):
+    for n in range(nb - 1):
+        i = body_order[n]
         ja = body_jntadr[i]
         if body_jntnum[i] == 1 and jnt_type[ja] == FREE:
             a = jnt_qposadr[ja]
@@ -253,7 +255,9 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
             q0, q1, q2, q3 = qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6]
         else:
             p = body_parent[i]
-            v0, v1, v2 = _mv(xmat, p, body_pos[i, 0], body_pos[i, 1], body_pos[i, 2])
+            v0, v1, v2 = _mv(xmat[p, 0], xmat[p, 1], xmat[p, 2], xmat[p, 3], xmat[p, 4],
+                             xmat[p, 5], xmat[p, 6], xmat[p, 7], xmat[p, 8],
+                             body_pos[i, 0], body_pos[i, 1], body_pos[i, 2])
             p0 = xpos[p, 0] + v0
             p1 = xpos[p, 1] + v1
             p2 = xpos[p, 2] + v2
@@ -305,14 +309,14 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
         xpos[i, 0] = p0
         xpos[i, 1] = p1
         xpos[i, 2] = p2
-        _q2m(xmat, i, q0, q1, q2, q3)
-    for i in range(1, nb):
-        _l2g(xipos, ximat, i, body_ipos, body_iquat, i, i, body_sameframe[i], xpos, xquat,
-             xmat, xipos, ximat)
+        r = _q2m(q0, q1, q2, q3)
+        for k in range(9):
+            xmat[i, k] = r[k]
+    _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat)
     _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
 
 
-@njit
+@njit_nort
 def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
     """Copy ``qpos_in`` into ``qpos`` and normalise its free/ball quaternions."""
     for k in range(qpos.shape[0]):
@@ -328,7 +332,7 @@ def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
             qpos[a + 3] = q3
 
 
-@njit
+@njit_nort
 def _world_frame(xpos, xquat, xmat, xipos, ximat):
     """Body 0 (the world): zero position, identity orientation."""
     for k in range(3):
@@ -348,7 +352,7 @@ def _world_frame(xpos, xquat, xmat, xipos, ximat):
     ximat[0, 8] = 1.0
 
 
-@njit
+@njit_nort
 def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
     """mj_comPos: backward pass for the subtree CoMs [m] (MuJoCo 4 puts every body's own
     m x_i in first, then adds the children: same order here)."""
@@ -372,41 +376,87 @@ def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
                 subtree_com[i, k] = subtree_com[i, k] * inv
 
 
-@njit
+@njit_nort
 def fk_sites(sites, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
              ximat, site_xpos, site_xmat, work):
     """World pose of the chosen ``sites`` (k,) into ``site_xpos (k, 3)``, ``site_xmat (k, 9)``
     (``work`` is unused, kept for the signature)."""
     for n in range(sites.shape[0]):
         s = sites[n]
-        _l2g(site_xpos, site_xmat, n, site_pos, site_quat, s, site_body[s], site_sameframe[s],
-             xpos, xquat, xmat, xipos, ximat)
+        b = site_body[s]
+        sf = site_sameframe[s]
+        if sf == 0 or sf == 3 or sf == 4:
+            v0, v1, v2 = _mv(xmat[b, 0], xmat[b, 1], xmat[b, 2], xmat[b, 3], xmat[b, 4],
+                             xmat[b, 5], xmat[b, 6], xmat[b, 7], xmat[b, 8],
+                             site_pos[s, 0], site_pos[s, 1], site_pos[s, 2])
+            site_xpos[n, 0] = v0 + xpos[b, 0]
+            site_xpos[n, 1] = v1 + xpos[b, 1]
+            site_xpos[n, 2] = v2 + xpos[b, 2]
+        elif sf == 1:
+            for k in range(3):
+                site_xpos[n, k] = xpos[b, k]
+        else:
+            for k in range(3):
+                site_xpos[n, k] = xipos[b, k]
+        if sf == 0:
+            q0, q1, q2, q3 = _mq(xquat[b, 0], xquat[b, 1], xquat[b, 2], xquat[b, 3],
+                                 site_quat[s, 0], site_quat[s, 1], site_quat[s, 2],
+                                 site_quat[s, 3])
+            r = _q2m(q0, q1, q2, q3)
+            for k in range(9):
+                site_xmat[n, k] = r[k]
+        elif sf == 1 or sf == 3:
+            for k in range(9):
+                site_xmat[n, k] = xmat[b, k]
+        else:
+            for k in range(9):
+                site_xmat[n, k] = ximat[b, k]
 
 
 @njit
 def fk_batch(Q, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
              body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-             out_com, out_xipos):
+             body_order, out_com, out_xipos):
     """Kinematics of every row of ``Q`` (T, nq): whole-robot CoM ``out_com`` (T, 3) (subtree
     of body 1) and body CoMs ``out_xipos`` (T, nb, 3) [m] (throughput benchmark and batch
     use)."""
     nb = body_parent.shape[0]
     nq = qpos0.shape[0]
-    qpos = np.empty(nq)
-    xpos = np.empty((nb, 3))
-    xquat = np.empty((nb, 4))
-    xmat = np.empty((nb, 9))
-    xipos = np.empty((nb, 3))
-    ximat = np.empty((nb, 9))
-    stc = np.empty((nb, 3))
-    ms = np.empty(nb)
-    work = np.empty(N_WORK)
+    # borrowed (no reference counting on every call of fk_tree)
+    (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
+     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order) = (
+        borrow(body_parent), borrow(body_jntadr), borrow(body_jntnum), borrow(body_sameframe),
+        borrow(body_pos), borrow(body_quat), borrow(body_ipos), borrow(body_iquat),
+        borrow(body_mass), borrow(jnt_type), borrow(jnt_qposadr), borrow(jnt_axis),
+        borrow(jnt_pos), borrow(qpos0), borrow(body_order))
+    # one buffer, borrowed views of it (kept alive by its use after the loop)
+    buf = np.empty(2 * nq + 32 * nb + N_WORK)
+    o = 0
+    qpos = view1d(buf, o, nq)
+    o += nq
+    xpos = view2d(buf, o, nb, 3)
+    o += 3 * nb
+    xquat = view2d(buf, o, nb, 4)
+    o += 4 * nb
+    xmat = view2d(buf, o, nb, 9)
+    o += 9 * nb
+    xipos = view2d(buf, o, nb, 3)
+    o += 3 * nb
+    ximat = view2d(buf, o, nb, 9)
+    o += 9 * nb
+    stc = view2d(buf, o, nb, 3)
+    o += 3 * nb
+    ms = view1d(buf, o, nb)
+    o += nb
+    work = view1d(buf, o, N_WORK)
     for t in range(Q.shape[0]):
         fk_tree(Q[t], body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
                 body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
-                jnt_pos, qpos0, qpos, xpos, xquat, xmat, xipos, ximat, stc, ms, work)
+                jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat, stc, ms,
+                work)
         for k in range(3):
             out_com[t, k] = stc[1, k]
         for i in range(nb):
             for k in range(3):
                 out_xipos[t, i, k] = xipos[i, k]
+    buf[0] = 0.0

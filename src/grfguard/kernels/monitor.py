@@ -344,6 +344,8 @@ class MonitorKernel:
         self.ex = np.zeros(N_EX)
         self.xbuf = np.zeros(n_in)
         self.ybuf = np.zeros(len(self.out_cols))
+        self.sin = (n_in,)
+        self.sout = (len(self.out_cols),)
         self._pack()
 
     # Every array of the step lives in two buffers (floats F, ints I) so that a call from
@@ -519,14 +521,19 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
     order) as the pure-Python stages."""
     x = k.xbuf
     odd = False
-    for j, c in enumerate(k.in_cols):
-        try:
-            x[j] = float(row[c])
-        except KeyError:
-            x[j] = math.nan
-        except (TypeError, ValueError, OverflowError):
-            x[j] = math.nan
-            odd = True
+    vals = [row.get(c, math.nan) for c in k.in_cols]
+    try:
+        x[:] = vals  # one conversion in C (numbers, numeric text, booleans)
+        for j in np.flatnonzero(np.isnan(x)):  # None -> NaN here, an error for float()
+            if vals[j] is None:
+                odd = True
+    except (TypeError, ValueError, OverflowError):
+        for j, v in enumerate(vals):
+            try:
+                x[j] = float(v)
+            except (TypeError, ValueError, OverflowError):
+                x[j] = math.nan
+                odd = True
     y = k.step(x, k.ybuf).tolist()
     ex = k.ex
     out: dict[str, Any] = {}

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import njit_nort
 
 __all__ = ["RHO", "prior_qp", "MAX_CORNERS"]
 
@@ -31,7 +31,7 @@ RHO = 100.0
 MAX_CORNERS = 16
 
 
-@njit
+@njit_nort
 def _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
     """Least squares on the free corners (:func:`_ls_closed_form`, or the QR when the
     corners are close to a line)."""
@@ -39,7 +39,7 @@ def _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
         _ls_correction_qr(rel, prior, total, sw, free, nfree, z, M, rhs, dots)
 
 
-@njit
+@njit_nort
 def _ls_closed_form(rel, prior, total, sw, free, nfree, z):
     """Least squares on the free corners: ``z[free] = prior + u``; other entries untouched.
 
@@ -103,7 +103,7 @@ def _ls_closed_form(rel, prior, total, sw, free, nfree, z):
     return True
 
 
-@njit
+@njit_nort
 def _ls_correction_qr(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
     """:func:`_ls_correction` by a Householder QR of ``[B; sqrt(w) I]`` (heavy row
     first); ``M`` ((3 + K) x K) and ``rhs`` (3 + K) are scratch. Used when the corners
@@ -175,7 +175,7 @@ def _ls_correction_qr(rel, prior, total, sw, free, nfree, z, M, rhs, dots):
         z[j] = prior[j] + dots[c]
 
 
-@njit
+@njit_nort
 def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
     """Minimiser ``x[:n]`` (not yet rescaled) of the compliance QP over ``n`` corners.
 
@@ -254,7 +254,7 @@ def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
                 break
 
 
-@njit
+@njit_nort
 def _entering_corner(rel, prior, total, w2, n, x, free, isfree, nfree):
     """Index of the bound corner with the largest positive gradient of the negative
     objective at ``x`` (the next to free), or -1 if none (``x`` optimal)."""

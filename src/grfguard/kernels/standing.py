@@ -28,11 +28,14 @@ _BASE_SUM, _BASE, _TOT_SUM, _TOT_BASE, _LP, _OVER, _QUIET, _HALF = (
 _FLAGS, _KINDS, _ETA, _HELD, _HELD_KIND, _HELD_ETA, _STAGE = 58, 66, 74, 82, 90, 98, 106
 _PREV, _LIFTED = 114, 116
 _WAS, _KB, _EB, _DEV, _DEVS, _SORT, _D = 118, 126, 134, 142, 150, 158, 166  # scratch
-N_SD = 174
+_XLP, _HELD_GAIN, _HELD_REF, _E_OFF, _E_GAIN = 174, 182, 190, 198, 206
+_BB, _LB = 214, 222  # scratch: baseline and level before the sample
+N_SD = 230
 # parameters
 (_S_ON, _S_DT, _S_A, _S_SETTLE, _S_BASELINE, _S_THR, _S_PERSIST, _S_ISO, _S_RISE, _S_SHIFT,
- _S_CLEAR) = range(11)
-N_SP = 11
+ _S_CLEAR, _S_AHOLD) = range(12)
+N_SP = 12
+_K_GAIN = 9
 
 
 def standing_params(stage, dt_s: float) -> np.ndarray:
@@ -48,6 +51,7 @@ def standing_params(stage, dt_s: float) -> np.ndarray:
     p[_S_SETTLE], p[_S_BASELINE], p[_S_THR] = c.settle_s, c.baseline_s, c.threshold_n
     p[_S_PERSIST], p[_S_ISO], p[_S_RISE] = c.persist_s, c.isolation_ratio, c.drift_rise_s
     p[_S_SHIFT], p[_S_CLEAR] = c.max_shift_fraction, c.clear_s
+    p[_S_AHOLD] = stage._a_hold
     return p
 
 
@@ -60,6 +64,7 @@ def _det_reset(sd):
         sd[_BASE_SUM + i] = 0.0
         sd[_BASE + i] = 0.0
         sd[_LP + i] = math.nan
+        sd[_XLP + i] = math.nan
         sd[_OVER + i] = 0.0
         sd[_QUIET + i] = 0.0
         sd[_HALF + i] = math.nan
@@ -79,6 +84,10 @@ def standing_reset(sd):
         sd[_HELD + i] = 0.0
         sd[_HELD_KIND + i] = _K_NONE
         sd[_HELD_ETA + i] = 0.0
+        sd[_HELD_GAIN + i] = math.nan
+        sd[_HELD_REF + i] = 0.0
+        sd[_E_OFF + i] = 0.0
+        sd[_E_GAIN + i] = 0.0
         sd[_STAGE + i] = 0.0
     for f in range(2):
         sd[_PREV + f] = 1.0
@@ -124,8 +133,10 @@ def _det_update(sd, sp, x, v, ds, tot):
         lp = sd[_LP + i]
         if not math.isfinite(lp) and fin:
             sd[_LP + i] = d[i]
+            sd[_XLP + i] = x[i]
         elif fin:
             sd[_LP + i] = lp + a * (d[i] - lp)
+            sd[_XLP + i] += a * (x[i] - sd[_XLP + i])
     if sd[_DS] < sp[_S_SETTLE]:
         return
     if sd[_BASE_SET] == 0.0:
@@ -189,6 +200,26 @@ def _contact(cref, cest):
 
 
 @njit
+def _held(sd, sp, i, xi, vi):
+    """``StandingStage._held``: kind code and eta [N] of a held sensor (offset or gain,
+    whichever explains the reading better)."""
+    eta = sd[_HELD_ETA + i]
+    g = sd[_HELD_GAIN + i]
+    if sd[_HELD_KIND + i] == _K_GAIN:
+        return float(_K_GAIN), (xi - xi / g if math.isfinite(xi) else eta)
+    if (math.isfinite(g) and g > 0 and sd[_HELD_KIND + i] == _K_OFFSET
+            and math.isfinite(xi) and math.isfinite(vi)):
+        ref = vi + sd[_HELD_REF + i]
+        a = sp[_S_AHOLD]
+        sd[_E_OFF + i] += a * (abs(xi - eta - ref) - sd[_E_OFF + i])
+        sd[_E_GAIN + i] += a * (abs(xi / g - ref) - sd[_E_GAIN + i])
+        if sd[_E_OFF + i] - sd[_E_GAIN + i] > sp[_S_THR]:
+            sd[_HELD_KIND + i] = _K_GAIN
+            return float(_K_GAIN), xi - xi / g
+    return sd[_HELD_KIND + i], eta
+
+
+@njit
 def standing_step(sd, sp, x, v, tot, cref, cest, oflag, okind, oeta, orec):
     """``StandingStage.step``: edits the output flag/kind code/eta/recovered (8,) of the
     detector and recovery in place."""
@@ -198,6 +229,8 @@ def standing_step(sd, sp, x, v, tot, cref, cest, oflag, okind, oeta, orec):
         sd[_WAS + i] = sd[_FLAGS + i]
         sd[_KB + i] = sd[_KINDS + i]
         sd[_EB + i] = sd[_ETA + i]
+        sd[_BB + i] = sd[_BASE + i] if sd[_BASE_SET] != 0.0 else math.nan
+        sd[_LB + i] = sd[_XLP + i]
     _det_update(sd, sp, x, v, c0 and c1, tot)
     done0 = False
     done1 = False
@@ -221,6 +254,11 @@ def standing_step(sd, sp, x, v, tot, cref, cest, oflag, okind, oeta, orec):
             sd[_HELD + i] = 1.0
             sd[_HELD_KIND + i] = sd[_KB + i]
             sd[_HELD_ETA + i] = sd[_EB + i]
+            load = sd[_LB + i] - sd[_EB + i]
+            sd[_HELD_GAIN + i] = sd[_LB + i] / load if load > sp[_S_THR] else math.nan
+            sd[_HELD_REF + i] = sd[_BB + i] if math.isfinite(sd[_BB + i]) else 0.0
+            sd[_E_OFF + i] = 0.0
+            sd[_E_GAIN + i] = 0.0
             sd[_STAGE + i] = 0.0
     for i in range(8):
         if oflag[i] != 0.0:
@@ -241,8 +279,7 @@ def standing_step(sd, sp, x, v, tot, cref, cest, oflag, okind, oeta, orec):
             kind = sd[_KINDS + i]
             eta = sd[_ETA + i]
         elif sd[_HELD + i] != 0.0:
-            kind = sd[_HELD_KIND + i]
-            eta = sd[_HELD_ETA + i]
+            kind, eta = _held(sd, sp, i, x[i], v[i])
         else:
             continue
         oflag[i] = 1.0

@@ -35,13 +35,12 @@ from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
-from numpy.lib.stride_tricks import as_strided
 from scipy.signal import butter, lfilter_zi
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
-from grfguard.kernels._jit import fma, njit
+from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
 from grfguard.kernels.nnls import prior_qp
 
@@ -75,14 +74,14 @@ def _state_size(nbr: int, order: int) -> int:
     return _S_FIXED + 15 * order + 12 * nbr
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _v2(a, o, n, m):
-    """(n, m) C-contiguous view of ``a[o : o + n * m]`` (8-byte items) without numpy's
-    reshape call (which costs about 20 ns in compiled code)."""
-    return as_strided(a[o:], (n, m), (m * 8, 8))
+    """(n, m) C-contiguous view of ``a[o : o + n * m]`` without numpy's reshape call
+    (which costs about 20 ns in compiled code)."""
+    return view2d(a, o, n, m)
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _qmul(aw, ax, ay, az, bw, bx, by, bz):
     return (
         aw * bw - ax * bx - ay * by - az * bz,
@@ -92,7 +91,7 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):
     )
 
 
-@njit(inline="always")
+@njit_nort(inline="always")
 def _qexp(x, y, z):
     th = math.sqrt(x * x + y * y + z * z)
     if th < 1e-12:
@@ -101,7 +100,7 @@ def _qexp(x, y, z):
     return math.cos(0.5 * th), s * x, s * y, s * z
 
 
-@njit
+@njit_nort
 def _lfilter_step(b, a, zst, x, y, zi, init):
     """One DF2T step of every channel; ``zst`` (order, nch) state; ``init`` primes it."""
     order = b.shape[0] - 1
@@ -119,13 +118,13 @@ def _lfilter_step(b, a, zst, x, y, zi, init):
         y[c] = yn
 
 
-@njit(inline="always")
+@njit_nort
 def _sum8(a):
     # numpy's pairwise sum of a contiguous 8-vector
     return ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]))
 
 
-@njit(inline="always")
+@njit_nort
 def _sum_seq(a, n):
     s = a[0]
     for i in range(1, n):
@@ -133,7 +132,7 @@ def _sum_seq(a, n):
     return s
 
 
-@njit
+@njit_nort
 def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
           tree, sites, ws, iws):
     """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
@@ -160,7 +159,7 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
     aw, ax, ay, az = _attitude_filter(x, state, prm)
     p_AC0, p_AC1, p_AC2 = _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay,
                                       az, qpos, xpos, xquat, xmat, xipos, ximat, stc, msub,
-                                      sxp, sxm, qin, pk, tail, iws[32:43])
+                                      sxp, sxm, qin, pk, tail, view1d(iws, 32, 11))
     st0, st1 = _stance(x, prm, pk)
     pwt0, pwt1, pwt2, ground = _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1)
     com0 = pwt0 + p_AC0
@@ -176,15 +175,16 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
     fz = max(F2, 1.0)
     zmp0 = com0 - (h * F0 + ld1) / fz
     zmp1 = com1 - (h * F1 - ld0) / fz
-    ctc = iws[0:8]
+    ctc = view1d(iws, 0, 8)
     _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
     _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
-                 qp_dots, iws[8:16], iws[16:24], iws[24:32], tail, F2, zmp0, zmp1)
+                 qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8), tail,
+                 F2, zmp0, zmp1)
     _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
     return True
 
 
-@njit
+@njit_nort
 def _valid_sample(x, y, state, prm):
     """Whether row ``x`` is usable (finite joints, attitude and the optional gyro, acc and
     contact reference; non-zero quaternion). If not, ``y`` repeats the last output (NaN
@@ -220,12 +220,12 @@ def _valid_sample(x, y, state, prm):
     return ok
 
 
-@njit
+@njit_nort(inline="always")
 def _scratch_views(ws, nq, nb):
     """Named views into the float scratch ``ws`` (fixed layout); the last one is the
     rest of ``ws`` (solver and FK work space). No allocation, no reshape call."""
     o = 0
-    qpos = ws[o : o + nq]
+    qpos = view1d(ws, o, nq)
     o += nq
     xpos = _v2(ws, o, nb, 3)
     o += 3 * nb
@@ -239,56 +239,56 @@ def _scratch_views(ws, nq, nb):
     o += 9 * nb
     stc = _v2(ws, o, nb, 3)
     o += 3 * nb
-    msub = ws[o : o + nb]
+    msub = view1d(ws, o, nb)
     o += nb
     sxp = _v2(ws, o, 11, 3)
     o += 33
     sxm = _v2(ws, o, 11, 9)
     o += 99
-    qin = ws[o : o + nq]
+    qin = view1d(ws, o, nq)
     o += nq
-    raw = ws[o : o + 9]
+    raw = view1d(ws, o, 9)
     o += 9
-    main = ws[o : o + 9]
+    main = view1d(ws, o, 9)
     o += 9
-    v3a = ws[o : o + 3]
+    v3a = view1d(ws, o, 3)
     o += 3
-    v3b = ws[o : o + 3]
+    v3b = view1d(ws, o, 3)
     o += 3
-    v3c = ws[o : o + 3]
+    v3c = view1d(ws, o, 3)
     o += 3
-    v3d = ws[o : o + 3]
+    v3d = view1d(ws, o, 3)
     o += 3
     pk = _v2(ws, o, 8, 3)
     o += 24
-    tmp8 = ws[o : o + 8]
+    tmp8 = view1d(ws, o, 8)
     o += 8
-    prior8 = ws[o : o + 8]
+    prior8 = view1d(ws, o, 8)
     o += 8
     rel8 = _v2(ws, o, 8, 2)
     o += 16
-    forces = ws[o : o + 8]
+    forces = view1d(ws, o, 8)
     o += 8
-    lin = ws[o : o + 3]
+    lin = view1d(ws, o, 3)
     o += 3
-    cc = ws[o : o + 3]
+    cc = view1d(ws, o, 3)
     o += 3
-    qp_x = ws[o : o + 8]
+    qp_x = view1d(ws, o, 8)
     o += 8
-    qp_z = ws[o : o + 8]
+    qp_z = view1d(ws, o, 8)
     o += 8
     qp_M = _v2(ws, o, 11, 8)
     o += 88
-    qp_rhs = ws[o : o + 11]
+    qp_rhs = view1d(ws, o, 11)
     o += 11
-    qp_dots = ws[o : o + 8]
+    qp_dots = view1d(ws, o, 8)
     o += 8
     return (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a,
             v3b, v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs,
-            qp_dots, ws[o:])
+            qp_dots, view1d(ws, o, ws.shape[0] - o))
 
 
-@njit
+@njit_nort
 def _attitude_filter(x, state, prm):
     """Complementary attitude filter (gyro prediction pulled towards the measured
     quaternion by ``katt``); returns and stores the unit attitude (w, x, y, z)."""
@@ -320,13 +320,13 @@ def _attitude_filter(x, state, prm):
     return aw, ax, ay, az
 
 
-@njit
+@njit_nort
 def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, xpos, xquat,
                 xmat, xipos, ximat, stc, msub, sxp, sxm, qin, pk, work, sel):
     """Forward kinematics with the trunk at the origin: bodies, IMU/corner/sole sites,
     corner contact points ``pk`` [m]; returns the trunk-relative CoM (3 floats) [m]."""
     (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
-     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0) = tree
+     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order) = tree
     site_body, site_sameframe, site_pos, site_quat = sites
     qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
     tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
@@ -350,14 +350,14 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
         qin[iprm[_IP_JOINTS + j]] = x[j]
     fk_tree(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
             body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-            qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, work[0:27])
+            body_order, qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, work)
     sel[0] = iprm[_IP_IMU]
     for k in range(8):
         sel[1 + k] = iprm[_IP_CORNERS + k]
     sel[9] = iprm[_IP_SOLES]
     sel[10] = iprm[_IP_SOLES + 1]
     fk_sites(sel, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
-             ximat, sxp, sxm, work[0:7])
+             ximat, sxp, sxm, work)
     for k in range(8):
         pk[k, 0] = sxp[1 + k, 0]
         pk[k, 1] = sxp[1 + k, 1]
@@ -366,7 +366,7 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     return stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
 
 
-@njit
+@njit_nort
 def _stance(x, prm, pk):
     """Stance of the right and left foot: the contact reference if logged, else the
     foot whose lowest corner is within 1 cm of the lowest corner of both."""
@@ -382,7 +382,7 @@ def _stance(x, prm, pk):
     return st0, st1
 
 
-@njit
+@njit_nort
 def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
     """Leg odometry (no anchor attitude: the rotation correction is the identity):
     the trunk position in the world (3 floats) [m] and the ground height [m]; the anchor
@@ -409,7 +409,7 @@ def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
     return pwt0, pwt1, pwt2, ground
 
 
-@njit
+@njit_nort
 def _init_anchor(state, pk, sxp, st0, st1):
     """First anchor foot (the single stance foot, else the lower one) and its world
     position: the feet's midpoint (or the stance foot) at the origin, the sole on z = 0."""
@@ -435,7 +435,7 @@ def _init_anchor(state, pk, sxp, st0, st1):
     state[_S_ANCHOR] = anc
 
 
-@njit
+@njit_nort
 def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
     """Second differences over the last three samples of the IMU-relative CoM
     (``raw[0:3]``) and the IMU's world position (``raw[6:9]``) [m/s^2]; ``raw`` zeroed."""
@@ -463,7 +463,7 @@ def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
                 raw[off + k] = (v1 - v0) / dt
 
 
-@njit
+@njit_nort
 def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
                    order, dt):
     """Rate of the angular momentum about the CoM (``raw[3:6]``) [N m] from this and the
@@ -496,7 +496,7 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
     state[_S_PREVF] = 1.0
 
 
-@njit
+@njit_nort
 def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nbr, dt):
     """Angular momentum about the CoM ``cc`` (3 floats) [N m s]: the bodies' linear
     momenta (finite differences of their CoMs ``pb`` -> ``xipos``) plus their spin
@@ -553,7 +553,7 @@ def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nb
     return lin[0] + L0, lin[1] + L1, lin[2] + L2
 
 
-@njit
+@njit_nort
 def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v3d, aw, ax,
              ay, az, order, g):
     """Low-pass the raw rates and (if used) fuse the accelerometer; returns the total
@@ -590,7 +590,7 @@ def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v
     return mass * (cdd0 + 0.0), mass * (cdd1 + 0.0), mass * (cdd2 + g), ld0, ld1
 
 
-@njit
+@njit_nort
 def _world_acc(out, x, aw, ax, ay, az, g):
     """acc_W = R(q_att) acc - g e_z [m/s^2] (R from the normalised attitude, numpy's
     formula) into ``out``."""
@@ -612,7 +612,7 @@ def _world_acc(out, x, aw, ax, ay, az, g):
     out[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
 
 
-@njit
+@njit_nort
 def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
     """Move the corners ``pk`` to the world, ``tmp8`` = their height above ground [m];
     ``ctc`` (0/1) = corners in contact (the stance foot's corners, or with the kinematic
@@ -642,7 +642,7 @@ def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
             ctc[k] = 1 if (low or (foot and not (hm < ch) and tmp8[k] == hm)) else 0
 
 
-@njit
+@njit_nort
 def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
                  qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1):
     """Compliance prior + QP: the corner forces ``forces`` [N] (0 off contact, NaN if an
@@ -697,7 +697,7 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
             forces[cidx[c]] = qp_x[c]
 
 
-@njit
+@njit_nort
 def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
     """Write the output row ``y`` (:data:`OUT_COLUMNS`) and keep it in ``state``."""
     for k in range(8):
@@ -730,16 +730,16 @@ def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
     state[_S_N] += 1.0
 
 
-@njit
+@njit_nort(inline="always")
 def _unpack(cf, ci):
     nb, nj, nq, ns, order = ci[0], ci[1], ci[2], ci[3], ci[4]
     nbr = nb - 1
     o = 0
-    prm = cf[o : o + N_PRM]
+    prm = view1d(cf, o, N_PRM)
     o += N_PRM
     body_inertia = _v2(cf, o, nbr, 3)
     o += 3 * nbr
-    corner_radius = cf[o : o + 8]
+    corner_radius = view1d(cf, o, 8)
     o += 8
     filt_b = _v2(cf, o, 3, order + 1)
     o += 3 * (order + 1)
@@ -755,42 +755,45 @@ def _unpack(cf, ci):
     o += 3 * nb
     body_iquat = _v2(cf, o, nb, 4)
     o += 4 * nb
-    body_mass = cf[o : o + nb]
+    body_mass = view1d(cf, o, nb)
     o += nb
     jnt_axis = _v2(cf, o, nj, 3)
     o += 3 * nj
     jnt_pos = _v2(cf, o, nj, 3)
     o += 3 * nj
-    qpos0 = cf[o : o + nq]
+    qpos0 = view1d(cf, o, nq)
     o += nq
     site_pos = _v2(cf, o, ns, 3)
     o += 3 * ns
     site_quat = _v2(cf, o, ns, 4)
     i = 5
-    iprm = ci[i : i + N_IPRM]
+    iprm = view1d(ci, i, N_IPRM)
     i += N_IPRM
-    body_parent = ci[i : i + nb]
+    body_parent = view1d(ci, i, nb)
     i += nb
-    body_jntadr = ci[i : i + nb]
+    body_jntadr = view1d(ci, i, nb)
     i += nb
-    body_jntnum = ci[i : i + nb]
+    body_jntnum = view1d(ci, i, nb)
     i += nb
-    body_sameframe = ci[i : i + nb]
+    body_sameframe = view1d(ci, i, nb)
     i += nb
-    jnt_type = ci[i : i + nj]
+    jnt_type = view1d(ci, i, nj)
     i += nj
-    jnt_qposadr = ci[i : i + nj]
+    jnt_qposadr = view1d(ci, i, nj)
     i += nj
-    site_body = ci[i : i + ns]
+    site_body = view1d(ci, i, ns)
     i += ns
-    site_sameframe = ci[i : i + ns]
+    site_sameframe = view1d(ci, i, ns)
+    i += ns
+    body_order = view1d(ci, i, nb - 1)
     tree = (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
-            body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0)
+            body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
+            body_order)
     sites = (site_body, site_sameframe, site_pos, site_quat)
     return prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites
 
 
-@njit
+@njit_nort
 def vfs_step(x, y, state, cf, ci, ws, iws):
     """One sample of the compiled virtual force sensor (callable from other ``@njit`` code).
 
@@ -818,14 +821,17 @@ def vfs_step(x, y, state, cf, ci, ws, iws):
                  filt_zi, tree, sites, ws, iws)
 
 
-@njit
+@njit_nort
 def vfs_run(X, Y, state, cf, ci, ws, iws):
     """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22) in one compiled
     loop (the batch path: the same step as streaming); returns the number of valid
     samples. Arguments after ``X, Y`` as in :func:`vfs_step`."""
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
     n = 0
     for t in range(X.shape[0]):
-        if vfs_step(X[t], Y[t], state, cf, ci, ws, iws):
+        if _step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
+                 filt_zi, tree, sites, ws, iws):
             n += 1
     return n
 
@@ -833,6 +839,13 @@ def vfs_run(X, Y, state, cf, ci, ws, iws):
 #: Former names of :func:`vfs_step` / :func:`vfs_run`.
 vfs_step_packed = vfs_step
 vfs_run_packed = vfs_run
+
+
+_ND = np.ndarray
+_F8 = np.dtype(np.float64)
+_XST = (8,)
+_XSH = (N_IN,)
+_YSH = (N_OUT,)
 
 
 class VFSKernel:
@@ -912,7 +925,7 @@ class VFSKernel:
         ]), dtype=float)
         self.ci = np.ascontiguousarray(np.concatenate([
             header, ip, tm.body_parent, tm.body_jntadr, tm.body_jntnum, tm.body_sameframe,
-            tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe,
+            tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe, tm.body_order,
         ]), dtype=np.int64)
         self._entry = None
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
@@ -984,6 +997,13 @@ class VFSKernel:
         """One sample: input row (24,) -> output row (22,) (``y`` is filled if given)."""
         if y is None:
             y = np.empty(N_OUT)
+        ep = self._entry
+        if (ep is not None and x.__class__ is _ND and y.__class__ is _ND
+                and x.dtype is _F8 and y.dtype is _F8 and x.strides == _XST
+                and y.strides == _XST and x.shape == _XSH and y.shape == _YSH):
+            # fast path: float64 C rows of the right length straight into the machine code
+            ep(x, y, self.state, self.cf, self.ci, self.ws, self.iws)
+            return y
         x = np.ascontiguousarray(x, dtype=float)
         if x.shape != (N_IN,) or y.shape != (N_OUT,):
             # the compiled code does not check bounds: refuse wrong shapes here

@@ -11,6 +11,7 @@ from ``sensordata`` of the same ``mj_forward`` (time ``k`` ms, before the step t
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from typing import Any
 
@@ -116,7 +117,8 @@ def run_physics(
             the planned height); the message gives the time and the reason.
     """
     model = build_model(robot)
-    if perturb is not None:
+    if perturb is not None:  # edit a copy: build_model is cached per robot
+        model = copy.copy(model)
         perturb(model)
     data = mujoco.MjData(model)
     index = _sensor_index(model)

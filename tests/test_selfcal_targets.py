@@ -1,0 +1,127 @@
+"""Model self-calibration with EVERY gap of issue 10 at once (``reality/all.toml``: mass,
+trunk CoM, IMU mounting, gyro/accelerometer biases, iCub accelerometer vibration, encoder
+offsets, load-cell gains and zeros, sensor positions), on a 40 s simulated walk.
+
+The issue's targets are stated for 60 s of calibration data (benchmarks/bench_selfcal.py
+measures them); on 40 s the bounds here are looser where said: gains relative to each
+other 2 % (target 1 %)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from grfguard.calib import (
+    ModelCorrections,
+    apply_corrections,
+    corrected_config,
+    estimate_corrections,
+)
+from grfguard.detect import Monitor, MonitorConfig, calibrate_thresholds
+from grfguard.faults import inject_faults, parse_fault_spec
+from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, SURALP
+from grfguard.sim import GaitConfig, simulate
+from grfguard.sim.reality import load_reality
+
+
+@pytest.fixture(scope="module")
+def gap():
+    return load_reality("all")
+
+
+@pytest.fixture(scope="module")
+def cal_walk(gap):
+    return simulate(gait=GaitConfig(duration=40.0), seed=1, reality=gap)
+
+
+@pytest.fixture(scope="module")
+def corr(cal_walk) -> ModelCorrections:
+    return estimate_corrections(cal_walk)
+
+
+@pytest.fixture(scope="module")
+def corr_m(cal_walk, corr) -> ModelCorrections:
+    """The same fit with the weighed (true) mass: ``gain_i = (gain_i m)_fit / m``."""
+    m_true = SURALP.mass * (1 + cal_walk.attrs["reality"]["mass_error"])
+    km = {s: g * corr.mass_kg for s, g in corr.load_cell_gain.items()}
+    return dataclasses.replace(corr, mass_kg=m_true, measured_mass=True,
+                               load_cell_gain={s: v / m_true for s, v in km.items()})
+
+
+def test_all_gaps_corrections_meet_the_targets(cal_walk, corr, corr_m):
+    truth = cal_walk.attrs["reality"]
+    rpy = np.array(corr.imu_mount_rpy_deg[:2])
+    assert np.max(np.abs(rpy - truth["imu_mount_rpy_deg"][:2])) < 0.3
+    com = np.array([corr.trunk_com_x_m - SURALP.trunk_com_x,
+                    corr.trunk_com_y_m - SURALP.trunk_com_y])
+    assert np.max(np.abs(com - truth["trunk_com_offset_m"][:2])) < 0.01
+    zt = np.array([truth["load_cell_zero_n"][s] for s in SENSOR_NAMES])
+    ze = np.array([corr.load_cell_zero_n[s] for s in SENSOR_NAMES])
+    assert np.max(np.abs(ze - zt)) < 3.0
+    gt = np.array([truth["load_cell_gain"][s] for s in SENSOR_NAMES])
+    ge = np.array([corr.load_cell_gain[s] for s in SENSOR_NAMES])
+    rel = ge / gt
+    assert np.max(np.abs(rel / rel.mean() - 1)) < 0.02  # 40 s walk; target 1 % on 60 s
+    assert ge.mean() == pytest.approx(1.0, abs=1e-9)
+    m_seen = SURALP.mass * (1 + truth["mass_error"]) * gt.mean()
+    assert corr.mass_kg == pytest.approx(m_seen, rel=0.01)  # the weight the cells see
+    gm = np.array([corr_m.load_cell_gain[s] for s in SENSOR_NAMES])
+    assert gm.mean() == pytest.approx(gt.mean(), rel=0.01)  # weighed mass: common scale
+    # the vibrating accelerometer is recognised and kept out of the virtual sensor
+    assert corr.acc_vibration_rms_m_s2 > 0.5 and not corr.use_accelerometer
+    cfg = corrected_config(MonitorConfig(), corr)
+    assert cfg.vfs.use_accelerometer is False
+    assert corrected_config(None, None) == MonitorConfig()
+    # the encoder offsets are fitted only to flatten the soles: bounded by their prior
+    assert set(corr.encoder_offset_deg) == set(JOINT_NAMES)
+    assert max(abs(v) for v in corr.encoder_offset_deg.values()) < 1.5
+
+
+def test_calibrated_robot_detects_the_paper_offsets_without_false_alarms(
+        gap, cal_walk, corr_m):
+    """Thresholds on the first 25 s of the corrected walk (weighed mass), then a 12 s
+    walk of another seed with the paper's offsets on r2 and r4 at 5 s: both found within
+    0.5 s, no healthy sensor flagged, recovered force within 5 N RMS of the truth."""
+    corr = corr_m
+    cfg = corrected_config(MonitorConfig(), corr)
+    fixed = apply_corrections(cal_walk, corr)
+    th = calibrate_thresholds([fixed[fixed["time"] < 25.0]], config=cfg)
+    walk = simulate(gait=GaitConfig(duration=12.0), seed=3, reality=gap)
+    faulty = inject_faults(
+        walk, [parse_fault_spec(s) for s in ("r2=offset:100@5", "r4=offset:-100@5")], seed=0)
+    fc = apply_corrections(faulty, corr)
+    out = Monitor.for_log(fc, config=cfg.with_thresholds(th)).run(fc)
+    t = out["time"].to_numpy(float)
+    for s in ("r2", "r4"):
+        flag = out[f"flag_{s}"].to_numpy(bool)
+        assert not flag[t < 5.0].any()
+        assert flag.any() and t[np.argmax(flag)] - 5.0 <= 0.5
+        stance = (t > 7.0) & (out["contact_ref_r"].to_numpy(float) > 0.5)
+        err = out[f"recovered_{s}"].to_numpy(float) - out[f"true_force_{s}"].to_numpy(float)
+        assert np.sqrt(np.mean(err[stance] ** 2)) < 5.0
+    healthy = [s for s in SENSOR_NAMES if s not in ("r2", "r4")]
+    assert not out[[f"flag_{s}" for s in healthy]].any().any()
+
+
+def test_old_calibration_files_without_the_new_keys_still_load(tmp_path, corr):
+    d = corr.to_dict()
+    for k in ("acc_vibration_rms_m_s2", "use_accelerometer", "encoder_offset_deg"):
+        d.pop(k)
+    old = ModelCorrections.from_dict(d)
+    assert old.use_accelerometer and all(v == 0 for v in old.encoder_offset_deg.values())
+    p = tmp_path / "th.toml"
+    p.write_text(corr.to_toml())
+    back = ModelCorrections.from_toml(p)
+    assert back.encoder_offset_deg == pytest.approx(corr.encoder_offset_deg)
+    assert back.use_accelerometer is False
+
+
+def test_repeated_gap_simulations_are_identical(gap):
+    """The sensor position errors perturb a copy of the cached MuJoCo model: before, they
+    added up over the calls of one process (two identical calls differed by 95 N)."""
+    a = simulate(gait=GaitConfig(duration=2.0), seed=0, reality=gap)
+    b = simulate(gait=GaitConfig(duration=2.0), seed=0, reality=gap)
+    cols = [f"force_{s}" for s in SENSOR_NAMES]
+    assert np.array_equal(a[cols].to_numpy(), b[cols].to_numpy())
