@@ -162,10 +162,17 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--off", action="store_true", help="common_mode off (the plain monitor)")
     ap.add_argument("--ladder", action="store_true")
+    ap.add_argument("--only-ladder", action="store_true",
+                    help="print only the smallest detected offset / drift / gain per gap")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     cm = not args.off
     t0 = time.perf_counter()
+    if args.only_ladder:
+        for g in args.gaps:
+            print(f"| {g} | {_fmt_ladder(ladder(g, cm))} |", flush=True)
+        print(f"runtime {time.perf_counter() - t0:.0f} s")
+        return
     work = [(g, args.duration, args.scenario_duration, cm, args.ladder) for g in args.gaps]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as ex:
