@@ -234,15 +234,10 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
             body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
             jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com,
             mass_subtree, work):
-    """``mj_kinematics`` (bodies and inertial frames) and the subtree CoM of ``mj_comPos``.
-
-    ``qpos`` is a work copy of ``qpos_in`` (its free/ball quaternions get normalised);
-    outputs ``xpos (nb, 3)``, ``xquat (nb, 4)``, ``xmat (nb, 9)``, ``xipos (nb, 3)``,
-    ``ximat (nb, 9)``, ``subtree_com (nb, 3)`` [m], work ``mass_subtree (nb,)``; ``work``
-    is unused (kept for the signature). Bodies are visited in ``body_order`` (parents
-    first); each body's arithmetic is MuJoCo's, so the order does not change a bit. No
-    allocation.
-    """
+    """``mj_kinematics`` (bodies, inertial frames) and ``mj_comPos``'s subtree CoM into
+    ``xpos``, ``xquat``, ``xmat``, ``xipos``, ``ximat``, ``subtree_com`` [m] (``qpos``: work
+    copy of ``qpos_in``; ``work`` unused). Bodies in ``body_order`` (parents first; each
+    body's arithmetic is MuJoCo's, so the order changes no bit). No allocation."""
     nb = body_parent.shape[0]
     _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
     _world_frame(xpos, xquat, xmat, xipos, ximat)
