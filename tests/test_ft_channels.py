@@ -212,3 +212,12 @@ def test_streaming_update_equals_batch(talos, one_foot) -> None:
         else:
             assert (got == want).all(), key
     assert live.update({"time": 10.5}) is not None  # a sample without channels: no crash
+
+
+def test_a_gain_fault_stays_flagged_through_the_swings(talos, walk) -> None:
+    """A gain fault only shows under load; the quiet swings must not clear its flag."""
+    out = run_described(_inject(walk, {"ft_r_fz": "gain:1.2@5"}), robot=talos)
+    flag = out["flag_ft_r_fz"].to_numpy()
+    first = int(np.argmax(flag))
+    assert flag.any() and flag[first:].all()
+    assert out["kind_ft_r_fz"].iloc[-1] == "gain"

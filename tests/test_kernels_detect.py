@@ -66,7 +66,7 @@ def _python_stages(log: pd.DataFrame, cfg: MonitorConfig):
 
 def _assert_close(a: np.ndarray, b: np.ndarray, tol: float = 1e-9) -> None:
     np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
-    assert np.nanmax(np.abs(a - b), initial=0.0) <= tol
+    np.testing.assert_allclose(a, b, rtol=0.0, atol=tol, equal_nan=True)
 
 
 @pytest.mark.parametrize("name", list(SCENARIOS))

@@ -827,6 +827,10 @@ class Monitor:
             out = run_frame(self, k, log)
             out.attrs = {**log.attrs, "monitor": self.describe()}
             return out
+        return self._run_python(log)
+
+    def _run_python(self, log: pd.DataFrame) -> pd.DataFrame:
+        """``run`` through the Python stages (the monitor is reset)."""
         attrs = log.attrs
         # the stages read columns only: without the metadata pandas would otherwise
         # deep-copy on every column access (a large cost on long logs)

@@ -26,8 +26,10 @@ its own (causal: no look-ahead):
 6. **clearing**: the CUSUM keeps running on the raw residual while flagged; the flag
    clears (kind, fits and onset forgotten) after ``clear_s`` without alarm once
    ``clear_valid_fraction`` of ``clear_s`` in valid samples were quiet
-   (``|r| / sigma < kappa``); a frozen flag clears after ``clear_s`` of varying
-   readings, as the corner detector's flags do.
+   (``|r| / sigma < kappa``) since the last alarm (for a gain fault, which only shows
+   under load, valid samples in stance only);
+   a frozen flag clears after ``clear_s`` of varying readings, as the corner
+   detector's flags do.
 
 :meth:`ChannelMonitor.update` takes one sample (the virtual channels computed ahead, e.g.
 by the batch :func:`~grfguard.estimate.described.with_described_vfs`), and
@@ -273,6 +275,7 @@ class _Channel:
         self.frozen = False
         self.onset_s = math.nan
         self.last_alarm_s = math.nan
+        self.kind = "none"  # the kind given at the previous sample
         self.quiet = 0
         self.sums = [0.0] * 6  # Σr, Σ1, Στr, Σττ, Σvr, Σvv on valid samples since the onset
         self.srr = 0.0
@@ -475,10 +478,11 @@ class ChannelMonitor:
                 st.gp, st.gn = cusum_step(st.gp, st.gn, r / sig, cfg.kappa)
                 if max(st.gp, st.gn) > cfg.h:
                     if not st.frozen:
-                        st.last_alarm_s = t
+                        st.last_alarm_s, st.quiet = t, 0
                     st.gp = st.gn = 0.0
-                elif not st.frozen and abs(r / sig) < cfg.kappa:
-                    st.quiet += 1
+                elif (not st.frozen and abs(r / sig) < cfg.kappa
+                      and (loaded or st.kind != "gain")):
+                    st.quiet += 1  # a gain fault only shows under load: quiet in stance
             if (t - st.last_alarm_s >= cfg.clear_s
                     and st.quiet >= n_clear * cfg.clear_valid_fraction):
                 st.clear_flag()
@@ -488,6 +492,7 @@ class ChannelMonitor:
         if st.frozen:
             return True, "frozen", r, v, st.onset_s
         kind, (b, a, g) = _best_fit(st.sums, st.srr)
+        st.kind = kind
         fault = {"offset": b, "drift": a * (t - st.onset_s),
                  "gain": (g - 1.0) / g * x if g != 0 else 0.0}[kind]
         return True, kind, fault, x - fault, st.onset_s

@@ -28,9 +28,10 @@ the pendulum Kalman ZMP, the anchor attitude) and ``compiled=False`` run the Pyt
 below: stage methods over ``(T, ...)`` arrays (``_attitude``, ``forward_batch``,
 ``_odometry``, ``_momentum`` or ``_paper_momentum``, ``_split``, wired by ``_process``),
 batched by ``run`` (T = the whole log) and streamed by ``update`` (T = 1); stateful stages
-carry their state between calls. Both engines agree to about 1e-9 N on the default
-(``tests/test_kernels_vfs.py``). A sample with a non-finite input is skipped (the state
-does not move), the last output is held and ``vfs_valid`` is 0.
+carry their state between calls. Both engines use the same corner-QP solver and agree
+bit for bit on the tested walks (``tests/test_one_vfs.py``). A sample with a non-finite
+input is skipped (the state does not move), the last output is held and ``vfs_valid``
+is 0.
 
 Outputs: ``vfs_<s>`` for r1..r4, l1..l4 [N], ``com_est_x/y/z`` [m], ``vfs_total_r/l`` [N],
 ``vfs_cop_r_x/y``, ``vfs_cop_l_x/y`` [m, world; NaN when the foot carries < 1 N],

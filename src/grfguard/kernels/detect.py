@@ -657,8 +657,9 @@ def _classify(s, prm, t, x):
 
 # ---------------------------------------------------------------- recovery
 @njit
-def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
-    """``Recovery.step``: ``rec`` and ``eta`` of every sensor."""
+def _corrected(ss, prm, x, corrected, info, tmp):
+    """``Recovery._corrected``: per sensor the corrected reading [N] and whether the
+    reading carries information (1/0)."""
     a_lp = prm[P_ALP]
     for i in range(8):
         s = ss[i]
@@ -701,6 +702,12 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
         if fl and k == K_SATURATION and math.isfinite(xi) and xi != s[CV]:
             corrected[i] = xi
             info[i] = 1.0
+
+
+@njit
+def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
+    """``Recovery.step``: ``rec`` and ``eta`` of every sensor."""
+    _corrected(ss, prm, x, corrected, info, tmp)
     total = tot[0] + tot[1]
     n_lack = 0
     n_known = 0

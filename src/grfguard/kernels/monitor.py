@@ -154,23 +154,11 @@ def _time_guard(gs, t, dt, gap_limit):
 
 
 @njit
-def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
-                 xc, vy, ws):
-    """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
-
-    ``ex`` receives ``(rejected, jump [s], valid, bounded)`` of the sample (what the
-    Python side needs for the ``system_reason`` text). ``mp``: mode (1 = virtual sensor
-    inside), reject implausible, quaternion norm tolerance, quaternion column (-1: none);
-    ``lims`` (2, n_in): physical range per input column (+-inf: not checked);
-    ``ss``/``gs``/``prm``: detector state and parameters; ``sd``/``sp``: the standing
-    layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``: off); ``vstate``/``cf``/``ci``/
-    ``vws``/``viws``: the virtual sensor's (:class:`~grfguard.kernels.vfs.VFSKernel`);
-    ``xc`` (n_in,), ``vy`` (22,), ``ws`` (:data:`N_WS`): scratch.
-    """
-    n_in = xin.shape[0]
-    mode = mp[_M_MODE]
+def _input_guard(xin, xc, mp, lims):
+    """``InputGuard.clean_row``: ``xc`` = ``xin`` with implausible values NaN; True when
+    something was rejected."""
     rejected = False
-    for j in range(n_in):
+    for j in range(xin.shape[0]):
         q = xin[j]
         if not math.isnan(q) and not (lims[0, j] <= q and q <= lims[1, j]):
             xc[j] = math.nan
@@ -185,13 +173,13 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
             for j in range(4):
                 xc[qi + j] = math.nan
             rejected = True
-    clock, st, jump = _time_guard(gs, xin[0], prm[P_DT], prm[P_GAPLIM])
-    reset = gs[G_STARTED] != 0.0 and (st == ST_GAP or gs[G_PREV_INVALID] != 0.0)
-    gs[G_STARTED] = 1.0
-    v = ws[_W_V:_W_V + 8]
-    tot = ws[_W_TOT:_W_TOT + 2]
-    cest = ws[_W_CEST:_W_CEST + 2]
-    cref = ws[_W_CREF:_W_CREF + 2]
+    return rejected
+
+
+@njit
+def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
+    """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break,
+    or the row's precomputed columns); returns ``valid`` (``Monitor._valid``)."""
     if mode == 1.0:
         if reset:  # Monitor._vfs_resync
             vstate[_S_HN] = 0.0
@@ -204,20 +192,25 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
             tot[f] = vy[_O_TOT + f]
             cest[f] = vy[_O_CEST + f]
             cref[f] = xin[_I_REF_VFS + f]
-        valid = vy[_O_VALID] == 1.0
-    else:
-        for i in range(8):
-            v[i] = xc[11 + i]
-        fin = True
-        for f in range(2):
-            cref[f] = xin[9 + f]
-            tot[f] = xc[19 + f]
-            cest[f] = xc[21 + f]
-            fin = fin and math.isfinite(tot[f])
-        for i in range(8):
-            fin = fin and math.isfinite(v[i])
-        flag = xc[23]
-        valid = (flag == 1.0) if math.isfinite(flag) else fin
+        return vy[_O_VALID] == 1.0
+    for i in range(8):
+        v[i] = xc[11 + i]
+    fin = True
+    for f in range(2):
+        cref[f] = xin[9 + f]
+        tot[f] = xc[19 + f]
+        cest[f] = xc[21 + f]
+        fin = fin and math.isfinite(tot[f])
+    for i in range(8):
+        fin = fin and math.isfinite(v[i])
+    flag = xc[23]
+    return (flag == 1.0) if math.isfinite(flag) else fin
+
+
+@njit
+def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
+    """``Monitor._prepare``: range check of the virtual forces, ``Continuity.after``,
+    unusable virtual outputs set to NaN; returns ``(bounded, state code)``."""
     lo = prm[P_FLO]
     hi = prm[P_FHI]
     bounded = True
@@ -227,7 +220,6 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     for f in range(2):
         if not (math.isnan(tot[f]) or (2 * lo <= tot[f] and tot[f] <= 2 * hi)):
             bounded = False
-    # Continuity.after
     if reset:
         gs[G_RESET_CLOCK] = clock
     gs[G_PREV_INVALID] = 0.0 if valid else 1.0
@@ -244,28 +236,20 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
             tot[f] = math.nan
             cest[f] = math.nan
     if st != ST_OK:
-        state = st
-    elif not (valid and bounded):
-        state = ST_INVALID
-    elif not use:
-        state = ST_SETTLING
-    else:
-        state = ST_OK
-    rec = ws[_W_REC:_W_REC + 8]
-    eta = ws[_W_ETA:_W_ETA + 8]
-    detect_step(ss, gs, prm, clock, xc[1:9], v, tot, cref, cest, st == ST_GAP, rec, eta, ws)
-    oflag = ws[_W_FLAG:_W_FLAG + 8]
-    okind = ws[_W_KIND:_W_KIND + 8]
-    for i in range(8):
-        oflag[i] = ss[i, FLAG]
-        okind[i] = ss[i, KIND]
-    if sp[0] != 0.0:
-        standing_step(sd, sp, xc[1:9], v, tot, cref, cest, oflag, okind, eta, rec)
-    o = 0
-    if mode == 1.0:
-        for j in range(_NV):
-            yout[j] = vy[j]
-        o = _NV
+        return bounded, st
+    if not (valid and bounded):
+        return bounded, ST_INVALID
+    if not use:
+        return bounded, ST_SETTLING
+    return bounded, ST_OK
+
+
+@njit
+def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
+    """``Monitor._finish``: an implausible reading's flag reported as ``spikes``, the
+    recovered force within the plausible range; writes the detector columns."""
+    lo = prm[P_FLO]
+    hi = prm[P_FHI]
     for i in range(8):
         s = ss[i]
         flagged = oflag[i] != 0.0
@@ -281,6 +265,50 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
         if not math.isnan(r):
             r = min(max(r, lo), hi)
         yout[o + 24 + i] = r
+
+
+@njit
+def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
+                 xc, vy, ws):
+    """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
+
+    ``ex`` receives ``(rejected, jump [s], valid, bounded)`` of the sample (what the
+    Python side needs for the ``system_reason`` text). ``mp``: mode (1 = virtual sensor
+    inside), reject implausible, quaternion norm tolerance, quaternion column (-1: none);
+    ``lims`` (2, n_in): physical range per input column (+-inf: not checked);
+    ``ss``/``gs``/``prm``: detector state and parameters; ``sd``/``sp``: the standing
+    layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``: off); ``vstate``/``cf``/``ci``/
+    ``vws``/``viws``: the virtual sensor's (:class:`~grfguard.kernels.vfs.VFSKernel`);
+    ``xc`` (n_in,), ``vy`` (22,), ``ws`` (:data:`N_WS`): scratch.
+    """
+    mode = mp[_M_MODE]
+    rejected = _input_guard(xin, xc, mp, lims)
+    clock, st, jump = _time_guard(gs, xin[0], prm[P_DT], prm[P_GAPLIM])
+    # Continuity.before
+    reset = gs[G_STARTED] != 0.0 and (st == ST_GAP or gs[G_PREV_INVALID] != 0.0)
+    gs[G_STARTED] = 1.0
+    v = ws[_W_V:_W_V + 8]
+    tot = ws[_W_TOT:_W_TOT + 2]
+    cest = ws[_W_CEST:_W_CEST + 2]
+    cref = ws[_W_CREF:_W_CREF + 2]
+    valid = _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy)
+    bounded, state = _prepare(gs, prm, clock, st, reset, valid, v, tot, cest)
+    rec = ws[_W_REC:_W_REC + 8]
+    eta = ws[_W_ETA:_W_ETA + 8]
+    detect_step(ss, gs, prm, clock, xc[1:9], v, tot, cref, cest, st == ST_GAP, rec, eta, ws)
+    oflag = ws[_W_FLAG:_W_FLAG + 8]
+    okind = ws[_W_KIND:_W_KIND + 8]
+    for i in range(8):
+        oflag[i] = ss[i, FLAG]
+        okind[i] = ss[i, KIND]
+    if sp[0] != 0.0:
+        standing_step(sd, sp, xc[1:9], v, tot, cref, cest, oflag, okind, eta, rec)
+    o = 0
+    if mode == 1.0:
+        for j in range(_NV):
+            yout[j] = vy[j]
+        o = _NV
+    _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec)
     yout[o + 32] = state
     ex[0] = 1.0 if rejected else 0.0
     ex[1] = jump

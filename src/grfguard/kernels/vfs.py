@@ -35,7 +35,6 @@ from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
-from scipy.signal import butter, lfilter_zi
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
@@ -109,6 +108,15 @@ def _lfilter_step(b, a, zst, x, y, zi, init):
         for k in range(order):
             for c in range(nch):
                 zst[k, c] = zi[k] * x[c]
+    if order == 2:  # the default: straight-line code, same operations
+        b0, b1, b2, a1, a2 = b[0], b[1], b[2], a[1], a[2]
+        for c in range(nch):
+            xn = x[c]
+            yn = zst[0, c] + b0 * xn
+            zst[0, c] = zst[1, c] + xn * b1 - yn * a1
+            zst[1, c] = xn * b2 - yn * a2
+            y[c] = yn
+        return
     for c in range(nch):
         xn = x[c]
         yn = zst[0, c] + b[0] * xn
@@ -902,6 +910,8 @@ class VFSKernel:
         self.body_inertia = np.ascontiguousarray(kin.body_inertia, dtype=float)
         self.corner_radius = np.ascontiguousarray(kin.corner_radius, dtype=float)
         bs, as_, zs = [], [], []
+        from scipy.signal import butter, lfilter_zi  # (a slow import: only when built)
+
         for cut in (cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff):
             b, a = butter(cfg.filter_order, cut, btype="low", fs=1.0 / cfg.dt)
             b, a = np.asarray(b, float), np.asarray(a, float)
