@@ -412,6 +412,22 @@ class Monitor:
         self._quiet_config = self.config.with_thresholds(dataclasses.replace(
             th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))
 
+    def _vibration_frame(self, clean: pd.DataFrame, vdf: Any, n: int) -> tuple[Any, int]:
+        """Batch twin of the vibration switch: the first switched sample (``n`` when
+        never) and the VFS outputs with the quiet sensor's rows from there on."""
+        if self.vibration is None or vdf is None:
+            return vdf, n
+        k_vib = self.vibration.run(
+            pd.to_numeric(clean[IMU_ACC[0]], errors="coerce").to_numpy(float),
+            pd.to_numeric(clean[IMU_ACC[1]], errors="coerce").to_numpy(float))
+        if k_vib < n:
+            vq = self.vfs_quiet.run(clean)
+            self.vfs_quiet.reset()
+            vdf = vdf.copy()
+            qcols = [c for c in vdf.columns if c in vq.columns]
+            vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
+        return vdf, k_vib
+
     def _vibration_on(self) -> None:
         """Switch the detector to the widened corner threshold (once)."""
         self.detector.config = self._quiet_config
@@ -840,17 +856,7 @@ class Monitor:
                 vdf = self._vfs_batch(clean, resets)
             else:
                 vdf = self._vfs_reset_segments(clean, resets)
-        k_vib = n
-        if self.vibration is not None and vdf is not None:
-            k_vib = self.vibration.run(
-                pd.to_numeric(clean[IMU_ACC[0]], errors="coerce").to_numpy(float),
-                pd.to_numeric(clean[IMU_ACC[1]], errors="coerce").to_numpy(float))
-            if k_vib < n:
-                vq = self.vfs_quiet.run(clean)
-                self.vfs_quiet.reset()
-                vdf = vdf.copy()
-                qcols = [c for c in vdf.columns if c in vq.columns]
-                vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
+        vdf, k_vib = self._vibration_frame(clean, vdf, n)
         prep = self._prepare_frame(log, clean, vdf if vdf is not None else clean, times,
                                    reasons, resets)
         if self.config.method == "paper":

@@ -176,9 +176,22 @@ class CommonModeMonitor:
         Returns:
             The :class:`CommonModeResult` (never raises on bad numbers).
         """
-        c = self.config
         m = [float(q) for q in measured]
         v = [float(q) for q in vfs]
+        ok, use, phi = self._select(m, v, valid_foot, planned)
+        res = [m[i] - v[i] for i in range(8)]
+        self._drop_outlier(res, phi, use)
+        if any(use) and not frozen:
+            self._learn(res, phi, use)
+        return self._result(v, ok, phi)
+
+    def _select(
+        self, m: list[float], v: list[float], valid_foot: Sequence[bool],
+        planned: Sequence[float] | None,
+    ) -> tuple[list[bool], list[bool], list[tuple[float, float, float]]]:
+        """Finite pairs, sensors usable for the fit, regressors ``(v_i, L x_i / S_x,
+        L y_i / S_y)`` per sensor; counts the arming time."""
+        c = self.config
         isf = math.isfinite
         ok = [isf(a) and isf(b) for a, b in zip(m, v, strict=True)]
         loads = [math.fsum(q for q in v[4 * f : 4 * f + 4] if isf(q)) for f in range(2)]
@@ -193,70 +206,81 @@ class CommonModeMonitor:
         if any(use):
             self._armed_s += self.dt_s
         xs, ys = self._xl, self._yl
-        # regressors per sensor: (v_i, L x_i / S_x, L y_i / S_y)
         phi = [((v[i] if ok[i] else 0.0), loads[i // 4] * xs[i], loads[i // 4] * ys[i])
                for i in range(8)]
-        a0, b0, c0 = self._theta
-        res = [m[i] - v[i] for i in range(8)]
-        n_use = sum(use)
-        if n_use >= 3:
-            # a residual that stands out from the others is a sensor's, not the model's
-            af = self._alpha_f
-            e = {i: abs(res[i] - (af[i // 4] * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
-                 for i in range(8) if use[i]}
-            worst = max(e, key=e.__getitem__)
-            if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
-                use[worst] = False
-        if any(use) and not frozen:
-            lam = math.exp(-self.dt_s / c.time_constant_s)
-            M, b = self._M, self._b
-            M *= lam
-            b *= lam
-            sr = sv = 0.0
-            for f in range(2):
-                self._sr_f[f] *= lam
-                self._sv_f[f] *= lam
-                self._mv_f[f][0] *= lam
-                self._mv_f[f][1] *= lam
-            for i in range(8):
-                if use[i]:
-                    p0, p1, p2 = phi[i]
-                    r = res[i]
-                    M[0, 0] += p0 * p0
-                    M[0, 1] += p0 * p1
-                    M[0, 2] += p0 * p2
-                    M[1, 1] += p1 * p1
-                    M[1, 2] += p1 * p2
-                    M[2, 2] += p2 * p2
-                    b[0] += p0 * r
-                    b[1] += p1 * r
-                    b[2] += p2 * r
-                    sr += r
-                    sv += p0
-                    f = i // 4
-                    self._sr_f[f] += r
-                    self._sv_f[f] += p0
-                    self._mv_f[f][0] += p0 * p1
-                    self._mv_f[f][1] += p0 * p2
-            M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
-            self._sum_r = lam * self._sum_r + sr
-            self._sum_v = lam * self._sum_v + sv
-            self._loaded_s += self.dt_s
-            # alpha from the totals (robust), per foot (each foot's load cells have their
-            # own mean gain) once the foot has data; then the common CoP shift given them
-            alpha = self._sum_r / self._sum_v if self._sum_v > 0 else 0.0
-            sv_min = 0.1 * self._sum_v
-            self._alpha_f = [self._sr_f[f] / self._sv_f[f] if self._sv_f[f] > sv_min
-                             else alpha for f in range(2)]
-            af = self._alpha_f
-            reg = 1e-6 * (M[1, 1] + M[2, 2] + 1e-9)
-            m11, m12, m22 = M[1, 1] + reg, M[1, 2], M[2, 2] + reg
-            r1 = b[1] - af[0] * self._mv_f[0][0] - af[1] * self._mv_f[1][0]
-            r2 = b[2] - af[0] * self._mv_f[0][1] - af[1] * self._mv_f[1][1]
-            det = m11 * m22 - m12 * m12
-            if det > 0 and isf(det):
-                self._theta = np.array(
-                    [alpha, (m22 * r1 - m12 * r2) / det, (m11 * r2 - m12 * r1) / det])
+        return ok, use, phi
+
+    def _drop_outlier(self, res: list[float], phi: list, use: list[bool]) -> None:
+        """A residual that stands out from the others is a sensor's, not the model's:
+        leave it out of this sample (in place on ``use``)."""
+        c = self.config
+        if sum(use) < 3:
+            return
+        _, b0, c0 = self._theta
+        af = self._alpha_f
+        e = {i: abs(res[i] - (af[i // 4] * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
+             for i in range(8) if use[i]}
+        worst = max(e, key=e.__getitem__)
+        if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
+            use[worst] = False
+
+    def _learn(self, res: list[float], phi: list, use: list[bool]) -> None:
+        """Exponentially weighted sums, then the per-foot ratios and the CoP shift."""
+        c = self.config
+        isf = math.isfinite
+        lam = math.exp(-self.dt_s / c.time_constant_s)
+        M, b = self._M, self._b
+        M *= lam
+        b *= lam
+        sr = sv = 0.0
+        for f in range(2):
+            self._sr_f[f] *= lam
+            self._sv_f[f] *= lam
+            self._mv_f[f][0] *= lam
+            self._mv_f[f][1] *= lam
+        for i in range(8):
+            if use[i]:
+                p0, p1, p2 = phi[i]
+                r = res[i]
+                M[0, 0] += p0 * p0
+                M[0, 1] += p0 * p1
+                M[0, 2] += p0 * p2
+                M[1, 1] += p1 * p1
+                M[1, 2] += p1 * p2
+                M[2, 2] += p2 * p2
+                b[0] += p0 * r
+                b[1] += p1 * r
+                b[2] += p2 * r
+                sr += r
+                sv += p0
+                f = i // 4
+                self._sr_f[f] += r
+                self._sv_f[f] += p0
+                self._mv_f[f][0] += p0 * p1
+                self._mv_f[f][1] += p0 * p2
+        M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
+        self._sum_r = lam * self._sum_r + sr
+        self._sum_v = lam * self._sum_v + sv
+        self._loaded_s += self.dt_s
+        # alpha from the totals (robust), per foot (each foot's load cells have their
+        # own mean gain) once the foot has data; then the common CoP shift given them
+        alpha = self._sum_r / self._sum_v if self._sum_v > 0 else 0.0
+        sv_min = 0.1 * self._sum_v
+        self._alpha_f = [self._sr_f[f] / self._sv_f[f] if self._sv_f[f] > sv_min
+                         else alpha for f in range(2)]
+        af = self._alpha_f
+        reg = 1e-6 * (M[1, 1] + M[2, 2] + 1e-9)
+        m11, m12, m22 = M[1, 1] + reg, M[1, 2], M[2, 2] + reg
+        r1 = b[1] - af[0] * self._mv_f[0][0] - af[1] * self._mv_f[1][0]
+        r2 = b[2] - af[0] * self._mv_f[0][1] - af[1] * self._mv_f[1][1]
+        det = m11 * m22 - m12 * m12
+        if det > 0 and isf(det):
+            self._theta = np.array(
+                [alpha, (m22 * r1 - m12 * r2) / det, (m11 * r2 - m12 * r1) / det])
+
+    def _result(self, v: list[float], ok: list[bool], phi: list) -> CommonModeResult:
+        """Status, reason and correction from the current fit."""
+        c = self.config
         warm = self._loaded_s >= c.warmup_s
         th = self._theta if warm else np.zeros(3)
         ratio = float(np.clip(th[0], -c.max_ratio, c.max_ratio))
