@@ -68,53 +68,12 @@ def errors(corr, truth: dict, nominal: RobotConfig) -> dict[str, float]:
     }
 
 
-def full_calibration() -> None:
-    """60 s calibration walk with every gap (with and without the vibration): estimated vs
-    true parameters, the gains' common scale with a measured mass, and the healthy sensors
-    flagged on a 60 s walk of another gait (0.15 m, 0.8 s; seed 5) after calibration, and
-    the per-corner / foot-total thresholds calibrated after the corrections relative to
-    those calibrated on the exact model (60 s walks, seed 1)."""
-    import dataclasses
-
-    from grfguard.detect import calibrate_monitor
-
-    gap_all = load_reality("all")
-    th_exact = calibrate_monitor([simulate(gait=GaitConfig(duration=60.0), seed=1)])
-    for name, gap in (("all", gap_all),
-                      ("all without vibration", dataclasses.replace(gap_all, acc_vibration=0.0))):
-        cal = simulate(gait=GaitConfig(duration=60.0), seed=1, reality=gap)
-        truth = cal.attrs["reality"]
-        corr = estimate_corrections(cal)
-        e = errors(corr, truth, RobotConfig())
-        m_true = RobotConfig().mass * (1 + truth["mass_error"])
-        cm = estimate_corrections(cal, measured_mass_kg=m_true)
-        gt = np.array([truth["load_cell_gain"][s] for s in SENSOR_NAMES])
-        ge = np.array([cm.load_cell_gain[s] for s in SENSOR_NAMES])
-        ev = simulate(gait=GaitConfig(duration=60.0, step_length=0.15, step_period=0.8),
-                      seed=5, reality=gap)
-        evc = apply_corrections(ev, corr)
-        out = Monitor.for_log(evc).run(evc)
-        th = calibrate_monitor([apply_corrections(cal, corr)])
-        ratio_corner = th.corner_sigma / th_exact.corner_sigma
-        ratio_total = th.total_sigma / th_exact.total_sigma
-        print(f"| {name} | {ratio_corner:.2f} | {ratio_total:.2f} |", flush=True)
-        print(f"| {name} | {e['imu_deg']:.2f} | {e['com_cm']:.2f} | {e['zero_n']:.2f} | "
-              f"{e['gain_pct']:.2f} | {e['weight_pct']:+.2f} | "
-              f"{100 * (ge.mean() / gt.mean() - 1):+.2f} | {' '.join(flagged(out)) or '-'} |",
-              flush=True)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--duration", type=float, default=30.0)
     ap.add_argument("--write", action="store_true")
     ap.add_argument("--gaps", nargs="*", default=list(REALITY_FILES))
-    ap.add_argument("--full-calibration", action="store_true",
-                    help="only the 60 s all-gaps calibration check")
     args = ap.parse_args()
-    if args.full_calibration:
-        full_calibration()
-        return
     gait = GaitConfig(duration=args.duration)
     nominal = RobotConfig()
     rows = []
