@@ -48,24 +48,12 @@ def mismatch_share(out, robot: RobotConfig) -> tuple[float, str]:
 
 
 def errors(corr, truth: dict, nominal: RobotConfig) -> dict[str, float]:
-    gt = np.array([truth["load_cell_gain"][s] for s in SENSOR_NAMES])
-    ge = np.array([corr.load_cell_gain[s] for s in SENSOR_NAMES])
-    zt = np.array([truth["load_cell_zero_n"][s] for s in SENSOR_NAMES])
-    ze = np.array([corr.load_cell_zero_n[s] for s in SENSOR_NAMES])
-    rel = ge / gt
-    m_true = nominal.mass * (1 + truth["mass_error"])
-    dcom = np.array(truth["trunk_com_offset_m"][:2])
-    return {
-        "imu_deg": float(np.max(np.abs(np.array(corr.imu_mount_rpy_deg[:2])
-                                       - np.array(truth["imu_mount_rpy_deg"][:2])))),
-        "com_cm": 100 * float(np.max(np.abs(
-            np.array([corr.trunk_com_x_m, corr.trunk_com_y_m]) - dcom))),
-        "zero_n": float(np.max(np.abs(ze - zt))),
-        "gain_pct": 100 * float(np.max(np.abs(rel / rel.mean() - 1))),
-        "weight_pct": 100 * float(corr.mass_kg / (m_true * gt.mean()) - 1),
-        "gyro": float(np.max(np.abs(np.array(corr.gyro_bias_rad_s)
-                                    - np.array(truth["gyro_bias_rad_s"])))),
-    }
+    """``bench_selfcal.errors`` plus the worst gyro-bias error [rad/s]."""
+    from bench_selfcal import errors as calibration_errors
+
+    return {**calibration_errors(corr, truth, nominal),
+            "gyro": float(np.max(np.abs(np.array(corr.gyro_bias_rad_s)
+                                        - np.array(truth["gyro_bias_rad_s"]))))}
 
 
 def main() -> None:

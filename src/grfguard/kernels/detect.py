@@ -852,38 +852,41 @@ def detect_run(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, flag, kind)
 
 
 @njit
+def time_guard_step(gs, t, dt, gap_limit):
+    """``TimeGuard.step``: ``(clock, state code, jump)``."""
+    last = gs[G_STAMP]
+    cl = gs[G_CLOCK]
+    if not math.isfinite(t):
+        st = ST_MISSING
+        jp = math.nan
+        c = cl + dt if math.isfinite(cl) else 0.0
+    else:
+        gs[G_STAMP] = t
+        if not math.isfinite(last):
+            st = ST_OK
+            jp = math.nan
+            c = t if (not math.isfinite(cl) or t > cl) else cl + dt
+        else:
+            jp = t - last
+            if jp > gap_limit:
+                st = ST_GAP
+            elif jp < 0.0:
+                st = ST_BACK
+            elif jp == 0.0:
+                st = ST_CONST
+            else:
+                st = ST_OK
+            c = t if t > cl else cl + dt
+    gs[G_CLOCK] = c
+    return c, st, jp
+
+
+@njit
 def time_guard_run(t, dt, gap_limit, gs, clock, state, jump):
     """``TimeGuard.step`` over every stamp of ``t`` (state kept in ``gs``): the monotone
     clock, the state code (:data:`ST_OK` ...) and the step from the last finite stamp."""
     for k in range(t.shape[0]):
-        tk = t[k]
-        last = gs[G_STAMP]
-        cl = gs[G_CLOCK]
-        if not math.isfinite(tk):
-            st = ST_MISSING
-            jp = _NAN
-            c = cl + dt if math.isfinite(cl) else 0.0
-        else:
-            gs[G_STAMP] = tk
-            if not math.isfinite(last):
-                st = ST_OK
-                jp = _NAN
-                c = tk if (not math.isfinite(cl) or tk > cl) else cl + dt
-            else:
-                jp = tk - last
-                if jp > gap_limit:
-                    st = ST_GAP
-                elif jp < 0.0:
-                    st = ST_BACK
-                elif jp == 0.0:
-                    st = ST_CONST
-                else:
-                    st = ST_OK
-                c = tk if tk > cl else cl + dt
-        gs[G_CLOCK] = c
-        clock[k] = c
-        state[k] = st
-        jump[k] = jp
+        clock[k], state[k], jump[k] = time_guard_step(gs, t[k], dt, gap_limit)
 
 
 class DetectKernel:

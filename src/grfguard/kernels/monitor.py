@@ -45,10 +45,8 @@ from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME
 from grfguard.kernels._jit import njit
 from grfguard.kernels.detect import (
     FLAG,
-    G_CLOCK,
     G_PREV_INVALID,
     G_RESET_CLOCK,
-    G_STAMP,
     G_STARTED,
     K_SPIKES,
     KIND,
@@ -60,16 +58,14 @@ from grfguard.kernels.detect import (
     P_GAPLIM,
     P_SETTLE,
     SPIKE,
-    ST_BACK,
-    ST_CONST,
     ST_GAP,
     ST_INVALID,
-    ST_MISSING,
     ST_OK,
     ST_SETTLING,
     detect_step,
     new_state,
     reset_state,
+    time_guard_step,
 )
 from grfguard.kernels.standing import N_SD, standing_params, standing_reset, standing_step
 from grfguard.kernels.vfs import (
@@ -121,36 +117,6 @@ def output_columns(with_vfs: bool) -> tuple[str, ...]:
            *(f"eta_{s}" for s in SENSOR_NAMES), *(f"recovered_{s}" for s in SENSOR_NAMES),
            "system_state")
     return (*OUT_COLUMNS, *det) if with_vfs else det
-
-
-@njit
-def _time_guard(gs, t, dt, gap_limit):
-    """``TimeGuard.step``: ``(clock, state code, jump)``."""
-    last = gs[G_STAMP]
-    cl = gs[G_CLOCK]
-    if not math.isfinite(t):
-        st = ST_MISSING
-        jp = math.nan
-        c = cl + dt if math.isfinite(cl) else 0.0
-    else:
-        gs[G_STAMP] = t
-        if not math.isfinite(last):
-            st = ST_OK
-            jp = math.nan
-            c = t if (not math.isfinite(cl) or t > cl) else cl + dt
-        else:
-            jp = t - last
-            if jp > gap_limit:
-                st = ST_GAP
-            elif jp < 0.0:
-                st = ST_BACK
-            elif jp == 0.0:
-                st = ST_CONST
-            else:
-                st = ST_OK
-            c = t if t > cl else cl + dt
-    gs[G_CLOCK] = c
-    return c, st, jp
 
 
 @njit
@@ -283,7 +249,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     """
     mode = mp[_M_MODE]
     rejected = _input_guard(xin, xc, mp, lims)
-    clock, st, jump = _time_guard(gs, xin[0], prm[P_DT], prm[P_GAPLIM])
+    clock, st, jump = time_guard_step(gs, xin[0], prm[P_DT], prm[P_GAPLIM])
     # Continuity.before
     reset = gs[G_STARTED] != 0.0 and (st == ST_GAP or gs[G_PREV_INVALID] != 0.0)
     gs[G_STARTED] = 1.0
