@@ -380,6 +380,17 @@ def _add_swing_sample(s, prm, t, x):
 
 # ---------------------------------------------------------------- tests
 @njit
+def _cusum2(a, ip, ineg, z, kappa):
+    """Two-sided CUSUM step on ``a[ip]`` / ``a[ineg]`` (allowance ``kappa``, both clipped
+    at 0); returns the larger of the two statistics."""
+    gp = a[ip] + z - kappa
+    gn = a[ineg] - z - kappa
+    a[ip] = gp if gp > 0.0 else 0.0
+    a[ineg] = gn if gn > 0.0 else 0.0
+    return max(a[ip], a[ineg])
+
+
+@njit
 def _is_comp(s):
     """``residual_tests.compensated``."""
     k = s[KIND]
@@ -426,11 +437,7 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
             alarm = SRC_CONST
     if swing_ok:
         z = xi / prm[P_SIG]
-        gp = s[SWP] + z - prm[P_SWK]
-        gn = s[SWN] - z - prm[P_SWK]
-        s[SWP] = gp if gp > 0.0 else 0.0
-        s[SWN] = gn if gn > 0.0 else 0.0
-        stat = max(s[SWP], s[SWN])
+        stat = _cusum2(s, SWP, SWN, z, prm[P_SWK])
         if stat > prm[P_SWH]:
             s[SWP] = s[SWN] = 0.0
             if alarm == SRC_NONE:
@@ -443,11 +450,7 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
         corr = xi - (s[ETA] if comp else 0.0)
         r = (corr - vi) / weight
         z = r / prm[P_CORSIG]
-        gp = s[CP] + z - prm[P_CORK]
-        gn = s[CN] - z - prm[P_CORK]
-        s[CP] = gp if gp > 0.0 else 0.0
-        s[CN] = gn if gn > 0.0 else 0.0
-        stat = max(s[CP], s[CN])
+        stat = _cusum2(s, CP, CN, z, prm[P_CORK])
         if stat > prm[P_CORH]:
             s[CP] = s[CN] = 0.0
             if not comp and alarm == SRC_NONE:
@@ -478,11 +481,7 @@ def _foot_total(ss, gs, prm, f, x, v, tot_f, weight, alarms, corr, tmp, part):
     r = (_fsum(corr, 4, part) - tot_f) / weight
     z = r / prm[P_TOTSIG]
     kap = prm[P_TOTK]
-    gp = gs[G_GPOS + f] + z - kap
-    gn = gs[G_GNEG + f] - z - kap
-    gs[G_GPOS + f] = gp if gp > 0.0 else 0.0
-    gs[G_GNEG + f] = gn if gn > 0.0 else 0.0
-    stat = max(gs[G_GPOS + f], gs[G_GNEG + f])
+    stat = _cusum2(gs, G_GPOS + f, G_GNEG + f, z, kap)
     sgn = 1.0 if z > 0 else -1.0
     vo = G_VOTES + 4 * f
     if abs(z) > kap:
