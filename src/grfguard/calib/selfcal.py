@@ -428,18 +428,22 @@ def _fit_acc_bias(data: list, g: float, sigma: dict[str, float]) -> np.ndarray:
     return ab.mean(axis=0)
 
 
+def _loaded_double_support(d, zero: np.ndarray, robot: RobotConfig) -> np.ndarray:
+    """Samples of one log in planned double support, away from contact changes, with both
+    feet carrying more than 15 % of the weight (zero-corrected readings); (T,) bool."""
+    fz = d.f - zero
+    load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
+    return ((d.cref.min(axis=1) > 0.5)
+            & _away_from_edges(d.cref, d.dt)
+            & (load.min(axis=1) > 0.15 * robot.weight))
+
+
 def _fit_imu_mount(data: list, robot: RobotConfig, zero: np.ndarray,
                    sigma: dict[str, float]) -> np.ndarray:
     """Stage 4: IMU mounting rotation ``R_BI`` (3, 3) from flat soles in double support."""
     zB, gI = [], []
     for d in data:
-        fz = d.f - zero
-        load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
-        m = (
-            (d.cref.min(axis=1) > 0.5)
-            & _away_from_edges(d.cref, d.dt)
-            & (load.min(axis=1) > 0.15 * robot.weight)
-        )
+        m = _loaded_double_support(d, zero, robot)
         if not m.any():
             continue
         R_WI = quat_to_rotation(d.quat[m])
@@ -475,13 +479,7 @@ def _double_support_samples(data: list, robot: RobotConfig, zero: np.ndarray,
     the weight each), away from contact changes, every ``every_s`` [s]."""
     out = []
     for d in data:
-        fz = d.f - zero
-        load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
-        m = (
-            (d.cref.min(axis=1) > 0.5)
-            & _away_from_edges(d.cref, d.dt)
-            & (load.min(axis=1) > 0.15 * robot.weight)
-        )
+        m = _loaded_double_support(d, zero, robot)
         idx = np.flatnonzero(m)[:: max(1, int(round(every_s / d.dt)))]
         if len(idx):
             out.append((d, idx))
