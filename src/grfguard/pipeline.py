@@ -128,6 +128,13 @@ def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
     return pd.concat([keep, add], axis=1)[order]
 
 
+def _kernel_supports(cfg: Any) -> bool:
+    """The compiled virtual sensor covers ``cfg``."""
+    from grfguard.kernels.vfs import VFSKernel
+
+    return VFSKernel.supports(cfg)
+
+
 def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
     """Whether the log carries the gyro and the planned contact (the compiled virtual
     sensor's switches)."""
@@ -323,8 +330,10 @@ class Monitor:
             return "compiled=False"
         if self.config.method != "default":
             return f"method {self.config.method!r}"
-        if self.common is not None:
-            return "the common-mode layer"
+        if self.vfs_quiet is not None and not (
+                getattr(self.vfs, "compiled", False) and hasattr(self.vfs_quiet, "kernel")
+                and _kernel_supports(self.vfs_quiet.config)):
+            return "the vibration twin's virtual force sensor settings"
         if self.config.diagnostics:
             return "diagnostics"
         if self.vfs is None:
@@ -352,7 +361,12 @@ class Monitor:
                 prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
                                     self.guard, (self.inputs.force_lo, self.inputs.force_hi))
                 vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
-                k = MonitorKernel(prm, self.inputs, vk, self.standing)
+                system = None
+                if self.common is not None:  # the system layer (kernels/system.py)
+                    qk = (self.vfs_quiet.kernel(has_gyro, has_ref)
+                          if self.vfs_quiet is not None else None)
+                    system = (self, has_gyro, qk)
+                k = MonitorKernel(prm, self.inputs, vk, self.standing, system)
             except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
                 warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
                               "stages", RuntimeWarning, stacklevel=3)
@@ -632,7 +646,7 @@ class Monitor:
         ``contact_est_*``, ``vfs_valid`` (:mod:`grfguard.kernels.monitor`)."""
         from grfguard.kernels.monitor import input_columns
 
-        return input_columns(self.vfs is not None)
+        return input_columns(self.vfs is not None, self.common is not None)
 
     @property
     def output_columns(self) -> tuple[str, ...]:
@@ -643,7 +657,7 @@ class Monitor:
         :data:`grfguard.guard.SYSTEM_STATES`)."""
         from grfguard.kernels.monitor import output_columns
 
-        return output_columns(self.vfs is not None)
+        return output_columns(self.vfs is not None, self.common is not None)
 
     def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """One sample as arrays (the fast streaming call): ``x`` in
