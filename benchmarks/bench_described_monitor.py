@@ -97,6 +97,13 @@ def g1_part(n_clean: int) -> list[str]:
               f"{lp_err('r2', res):.3f} %, r4 {lp_err('r4', res):.3f} % and the healthy "
               f"l1 alike {lp_err('l1', walk):.3f} %: noise filtering, not recovery "
               "(grfguard does not filter).", ""]
+    return lines + g1_clean(r, n_clean)
+
+
+def g1_clean(r, n_clean: int) -> list[str]:
+    """G1 fault-free walks of 60 s, seeds 1..n_clean: false alarms with G1's and SURALP's
+    thresholds."""
+    lines: list[str] = []
     fa = {"G1 thresholds": 0, "SURALP thresholds": 0}
     flagged = {"G1 thresholds": 0.0, "SURALP thresholds": 0.0}
     from grfguard.detect.thresholds import default_thresholds
@@ -111,6 +118,7 @@ def g1_part(n_clean: int) -> list[str]:
                 f = out[f"flag_{s}"].to_numpy()
                 fa[name] += int(np.sum(f[1:] & ~f[:-1]) + f[0])
                 flagged[name] += float(f.mean()) / len(SENSOR_NAMES)
+        print(f"g1 seed {seed}: {fa} false alarm(s) so far", flush=True)
     lines.append(f"G1 fault-free: {n_clean} walks x 60 s (seeds 1-{n_clean}): "
                  + "; ".join(f"{k}: {v} false alarm(s), {100 * flagged[k] / n_clean:.2f} % "
                              "of sensor-time flagged" for k, v in fa.items()) + ".")
@@ -173,6 +181,11 @@ def talos_part(n_clean: int) -> list[str]:
     others = [c for c in (f"ft_{s}_{a}" for s in "rl" for a in FT_AXES)
               if c not in four and out[f"flag_{c}"].any()]
     lines += ["", f"Other channels flagged: {len(others)} {others if others else ''}".rstrip()]
+    return lines + talos_clean(r, n_clean)
+
+
+def talos_clean(r, n_clean: int) -> list[str]:
+    """Talos fault-free walks of 60 s, seeds 1..n_clean: false alarms on its 12 channels."""
     fa = chans = 0
     for seed in range(1, n_clean + 1):
         out = run_described(_walk(r, 60.0, seed), robot=r)
@@ -181,16 +194,17 @@ def talos_part(n_clean: int) -> list[str]:
                 fl = out[f"flag_ft_{s}_{a}"].to_numpy()
                 chans += int(fl.any())
                 fa += int(np.sum(fl[1:] & ~fl[:-1]) + fl[0])
-    lines += ["", f"Talos fault-free: {n_clean} walks x 60 s (seeds 1-{n_clean}), 12 "
+        print(f"talos seed {seed}: {fa} false alarm(s) so far", flush=True)
+    return ["", f"Talos fault-free: {n_clean} walks x 60 s (seeds 1-{n_clean}), 12 "
               f"channels: {fa} false alarm(s), {chans} channel(s) flagged."]
-    return lines
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--clean-walks", type=int, default=10)
-    ap.add_argument("--part", choices=("both", "g1", "talos"), default="both",
-                    help="g1 or talos alone: print only, BENCHMARKS.md is not updated")
+    ap.add_argument("--part", choices=("both", "g1", "talos", "clean"), default="both",
+                    help="g1 or talos alone, or only the fault-free walks of both (clean): "
+                    "print only, BENCHMARKS.md is not updated")
     args = ap.parse_args()
     t0 = time.perf_counter()
     lines = [f"Command: `.venv/bin/python benchmarks/bench_described_monitor.py "
@@ -199,6 +213,9 @@ def main() -> None:
         lines += g1_part(args.clean_walks)
     if args.part in ("both", "talos"):
         lines += talos_part(args.clean_walks)
+    if args.part == "clean":
+        lines += g1_clean(load_model(load_description("g1")), args.clean_walks)
+        lines += talos_clean(load_model(load_description("talos")), args.clean_walks)
     lines += ["", f"Wall time {time.perf_counter() - t0:.0f} s."]
     body = "\n".join(lines)
     print(body)

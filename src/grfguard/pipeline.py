@@ -49,6 +49,7 @@ from grfguard.detect.system import (
     ImuTiltLearner,
     SwingZeroLearner,
     hold_unarmed_tests,
+    quiet_vfs_config,
     swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
@@ -406,8 +407,7 @@ class Monitor:
         if vfs is None or not getattr(cfg, "use_accelerometer", False):
             return
         self.vibration = AccVibrationDetector(self.config.dt_s)
-        self.vfs_quiet = type(vfs)(vfs.robot, dataclasses.replace(cfg, use_accelerometer=False),
-                                   vfs.kin)
+        self.vfs_quiet = type(vfs)(vfs.robot, quiet_vfs_config(cfg), vfs.kin)
         th = self.config.thresholds
         self._quiet_config = self.config.with_thresholds(dataclasses.replace(
             th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))

@@ -33,12 +33,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from grfguard._validate import check_number
-from grfguard.model.robot import SURALP, RobotConfig
+from grfguard.errors import ConfigError
+from grfguard.model.robot import RobotConfig
 
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
     "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
     "hold_unarmed_tests", "VibrationConfig", "AccVibrationDetector", "swing_load_to_stance",
+    "quiet_vfs_config",
 ]
 
 
@@ -116,7 +118,7 @@ class CommonModeMonitor:
     """
 
     def __init__(
-        self, robot: RobotConfig = SURALP, dt_s: float = 0.001,
+        self, robot: RobotConfig, dt_s: float = 0.001,
         config: CommonModeConfig | None = None,
     ) -> None:
         self.robot = robot
@@ -363,7 +365,7 @@ class SwingZeroLearner:
     """
 
     def __init__(
-        self, robot: RobotConfig = SURALP, dt_s: float = 0.001,
+        self, robot: RobotConfig, dt_s: float = 0.001,
         config: SwingZeroConfig | None = None,
     ) -> None:
         self.robot = robot
@@ -529,6 +531,15 @@ class VibrationConfig:
         check_number(o, "limit_m_s2", self.limit_m_s2, 0.0, 1e3, "m/s^2")
         check_number(o, "start_s", self.start_s, 0.0, 600.0, "s")
         check_number(o, "corner_sigma_scale", self.corner_sigma_scale, 1.0, 100.0, "")
+
+
+def quiet_vfs_config(cfg):
+    """Settings of the twin virtual sensor used once the accelerometer vibrates
+    (:class:`AccVibrationDetector`): ``cfg`` (a ``VFSConfig``) without the accelerometer.
+    The one place that decides it (the Python and the compiled monitor both follow it)."""
+    import dataclasses
+
+    return dataclasses.replace(cfg, use_accelerometer=False)
 
 
 class AccVibrationDetector:
@@ -803,7 +814,7 @@ class SystemAwareMonitor:
     def __init__(
         self,
         config=None,
-        robot: RobotConfig = SURALP,
+        robot: RobotConfig | None = None,
         vfs=None,
         common: CommonModeConfig | None = None,
         standing=None,
@@ -813,6 +824,11 @@ class SystemAwareMonitor:
 
         self.config = config if config is not None else MonitorConfig()
         self.vfs = vfs
+        if robot is None:
+            robot = getattr(vfs, "robot", None)
+        if robot is None:
+            raise ConfigError("SystemAwareMonitor: no robot description; pass robot= "
+                              "(e.g. grfguard.model.robot.SURALP) or a virtual sensor")
         self.inner = Monitor(self.config, vfs=None)
         self.common = CommonModeMonitor(robot, self.config.dt_s, common)
         self.standing = StandingDetector(self.config.dt_s, standing)
