@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from grfguard.errors import ConfigError, LogFormatError
+from grfguard.errors import LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS, VirtualForceSensor
 from grfguard.io.schema import CONTACT_REF, IMU_GYRO
@@ -104,16 +104,14 @@ def test_settings_variants_match(walk):
         _assert_same(ref, out)
 
 
-def test_unsupported_settings_fall_back_or_raise(walk):
+def test_every_setting_is_compiled(walk):
     cfg = VFSConfig.paper()
-    assert not VFSKernel.supports(cfg)
-    with pytest.raises(ConfigError, match="com_method"):
-        VFSKernel(VirtualForceSensor(config=cfg))
+    assert VFSKernel.supports(cfg) and VFSKernel.unsupported(cfg) == ""
     log = walk.iloc[:300]
     cv = CompiledVirtualForceSensor.for_log(log, cfg)
-    assert not cv.compiled
-    ref = VirtualForceSensor.for_log(log, cfg).run(log)
-    pd.testing.assert_frame_equal(cv.run(log), ref)
+    assert cv.compiled and cv.kernel().n_in == 34  # + force sensors and planned ZMP
+    ref = VirtualForceSensor.for_log(log, cfg, compiled=False).run(log)
+    _assert_same(ref, cv.run(log))
 
 
 def test_compliance_qp_against_exact_rationals():

@@ -330,6 +330,8 @@ class Monitor:
             return ""
         if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
             return "a pure-Python virtual force sensor"
+        if getattr(getattr(self.vfs, "config", None), "com_method", "") == "paper":
+            return "the paper's CoM filter (its sensor reads the force sensors)"
         return ""
 
     def _kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:

@@ -110,11 +110,12 @@ VFS_OUTPUT_COLUMNS: tuple[str, ...] = (
 _MIN_FOOT_FORCE_N = 1.0
 
 
-def _in_columns() -> tuple[str, ...]:
-    """Input row layout of the compiled kernel (:data:`grfguard.kernels.vfs.IN_COLUMNS`)."""
-    from grfguard.kernels.vfs import IN_COLUMNS
+def _in_columns(cfg: VFSConfig) -> tuple[str, ...]:
+    """Input row layout of the compiled kernel (:data:`grfguard.kernels.vfs.IN_COLUMNS`,
+    with the force sensors and the planned ZMP for the paper's CoM filter)."""
+    from grfguard.kernels.vfs import IN_COLUMNS, PAPER_IN_COLUMNS
 
-    return IN_COLUMNS
+    return PAPER_IN_COLUMNS if cfg.com_method == "paper" else IN_COLUMNS
 
 
 def _robot_from_attrs(attrs: Mapping[str, Any]) -> RobotConfig:
@@ -232,7 +233,8 @@ class VirtualForceSensor:
         #: True when the compiled kernel runs (``compiled`` and the settings covered).
         self.compiled = bool(compiled) and VFSKernel.supports(self.config)
         self._kern: dict[tuple[bool, bool], Any] = {}
-        self._x = np.empty(len(_in_columns()))
+        self._in_cols = _in_columns(self.config)
+        self._x = np.empty(len(self._in_cols))
         self._y = np.empty(len(VFS_OUTPUT_COLUMNS))
         self.reset()
 
@@ -350,7 +352,7 @@ class VirtualForceSensor:
         """
         if self.compiled:
             x = self._x
-            for i, c in enumerate(_in_columns()):
+            for i, c in enumerate(self._in_cols):
                 try:
                     x[i] = float(row[c])
                 except (KeyError, TypeError, ValueError):
@@ -427,7 +429,7 @@ class VirtualForceSensor:
         """The compiled batch: the kernel's step looped over the log in one call."""
         from grfguard.kernels.vfs import log_to_array
 
-        X, has_gyro, has_ref = log_to_array(log)
+        X, has_gyro, has_ref = log_to_array(log, self._in_cols)
         k = self.kernel(has_gyro, has_ref)
         if resync is None:
             Y = k.run(X)
