@@ -14,6 +14,7 @@ import pytest
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS, VFSConfig, VirtualForceSensor
 from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
+from reference.vfs_stages import PythonVFS
 
 TOL_N = 1e-9  # forces [N]
 TOL_M = 1e-9  # CoM, ZMP, CoP [m]
@@ -32,8 +33,8 @@ CONFIGS = {
 
 
 def reference_run(log: pd.DataFrame, cfg: VFSConfig) -> pd.DataFrame:
-    """The pure-Python stages over the whole log."""
-    return VirtualForceSensor.for_log(log, cfg, compiled=False).run(log)
+    """The pure-Python stages (tests/reference/vfs_stages.py) over the whole log."""
+    return PythonVFS.for_log(log, cfg).run(log)
 
 
 @pytest.fixture(scope="module")
