@@ -178,19 +178,16 @@ class _PreparedFrame(NamedTuple):
 
 
 def _compiled_or(vfs: Any) -> Any:
-    """``vfs`` with its kernels compiled or loaded now when it runs compiled; the same
-    sensor on the Python stages when the kernels cannot be built here (e.g. the cache
-    cannot be written: a warning, the run goes on)."""
+    """``vfs`` with its kernels loaded from the on-disk cache (or compiled) now; when that
+    fails here (e.g. the cache cannot be written) a warning, and numba compiles them in
+    memory at the first sample."""
     from grfguard.kernels import warm_up
 
-    if not vfs.compiled:
-        return vfs
     try:
         warm_up()
-    except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
-        warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
-                      "Python stages", RuntimeWarning, stacklevel=3)
-        return type(vfs)(vfs.robot, vfs.config, vfs.kin, compiled=False)
+    except Exception as exc:  # noqa: BLE001 - compiled in memory at the first call instead
+        warnings.warn(f"the compiled kernels could not be loaded or cached ({exc}); they "
+                      "compile in memory at the first sample", RuntimeWarning, stacklevel=3)
     return vfs
 
 
@@ -289,10 +286,10 @@ class Monitor:
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
         the robot (physical ranges) from ``log.attrs``.
 
-        The virtual sensor is the compiled one (:mod:`grfguard.kernels`, same outputs to
-        about 1e-10 N) when it covers ``config.vfs`` and ``compiled`` (default
-        ``config.compiled``, True) is not False; its machine code is loaded from the
-        on-disk cache here (1-2 s once per process; about 35 s once per fresh install)."""
+        The virtual sensor is the compiled one (:mod:`grfguard.kernels`; every
+        ``config.vfs``); its machine code is loaded from the on-disk cache here (1-2 s once
+        per process; about 35 s once per fresh install). ``compiled=False`` runs the
+        detector's pure-Python stages around it."""
         from grfguard.calib.selfcal import robot_of
 
         cfg = config_for_log(log, config)
@@ -303,8 +300,7 @@ class Monitor:
         if not has_vfs:
             from grfguard.estimate.vfs import VirtualForceSensor
 
-            vfs = _compiled_or(VirtualForceSensor.for_log(
-                log, cfg.vfs, compiled=cfg.compiled if compiled is None else compiled))
+            vfs = _compiled_or(VirtualForceSensor.for_log(log, cfg.vfs))
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
@@ -340,6 +336,8 @@ class Monitor:
             return ""
         if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
             return "a pure-Python virtual force sensor"
+        if getattr(getattr(self.vfs, "config", None), "com_method", "") == "paper":
+            return "the paper's CoM filter (its sensor reads the force sensors)"
         return ""
 
     def _kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
