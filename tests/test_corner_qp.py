@@ -154,8 +154,7 @@ def test_compliance_split_is_the_exact_optimum_on_a_walk(monkeypatch) -> None:
     on the exact problem, on the samples of a simulated walk (single and double support):
     the forces agree to 1e-6 N (measured gap to an exact enumeration: 2e-9 N), the sum is
     exact and the objective is never worse than daqp's beyond rounding."""
-    import grfguard.estimate.vfs as vfs_mod
-    from grfguard.estimate.vfs import VirtualForceSensor
+    import reference.vfs_stages as vfs_mod
     from grfguard.sim import GaitConfig, NoiseConfig, simulate
 
     seen = {}
@@ -167,7 +166,7 @@ def test_compliance_split_is_the_exact_optimum_on_a_walk(monkeypatch) -> None:
 
     monkeypatch.setattr(vfs_mod, "split_with_prior", spy)
     log = simulate(gait=GaitConfig(duration=7.0), noise=NoiseConfig(), seed=2)
-    VirtualForceSensor.for_log(log, compiled=False).run(log)  # the Python stages' split
+    vfs_mod.PythonVFS.for_log(log).run(log)  # the Python stages' split
     corners, contact, zmp, total, w, k = seen["args"]
     ds = np.flatnonzero(contact.all(axis=1))
     ss = np.flatnonzero(contact.sum(axis=1) == 4)

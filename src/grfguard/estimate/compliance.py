@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-__all__ = ["compliance_prior", "qp_split", "solve_with_prior", "split_with_prior"]
+__all__ = ["compliance_prior", "qp_split", "solve_with_prior"]
 
 
 def compliance_prior(
@@ -106,25 +106,3 @@ def solve_with_prior(
     return qp_split(np.asarray(points_rel_m, float)[None], np.asarray(prior_n, float)[None],
                     np.array([total_force_n], float), weight,
                     np.asarray(contact, bool)[None])[0]
-
-
-def split_with_prior(
-    corners_W: np.ndarray,
-    contact: np.ndarray,
-    zmp_W: np.ndarray,
-    total_force_n: np.ndarray,
-    weight: float,
-    stiffness_n_m: float,
-) -> np.ndarray:
-    """Batch over T samples: corners (T, n, 3) in world [m], contact (T, n), ZMP (T, 2) [m],
-    total force (T,) [N]; returns (T, n) forces [N]."""
-    # vectorized prior (same arithmetic as compliance_prior)
-    z = corners_W[:, :, 2]
-    cnt = contact.sum(axis=1)
-    safe = np.maximum(cnt, 1)
-    zbar = np.where(contact, z, 0.0).sum(axis=1) / safe
-    prior = np.where(
-        contact, (total_force_n / safe)[:, None] + stiffness_n_m * (zbar[:, None] - z), 0.0
-    )
-    rel = corners_W[:, :, :2] - zmp_W[:, None, :]
-    return qp_split(rel, prior, total_force_n, weight, contact)

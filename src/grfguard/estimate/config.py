@@ -78,7 +78,7 @@ class VFSConfig:
     anchor_attitude_time_constant: float = 0.0
     #: ZMP from the multibody rates: ``direct`` (Newton-Euler with the filtered rates) or
     #: ``kalman`` (pendulum Kalman filter with the ZMP as a state on the kinematic CoM,
-    #: :class:`grfguard.estimate.com.ZMPKalmanFilter`; best without accelerometer).
+    #: :func:`grfguard.kernels.vfs_paper.zmp_kalman`; best without accelerometer).
     zmp_filter: str = "direct"
     #: Spectral density of the ZMP velocity random walk of that filter in [m^2/s].
     zmp_rate_psd: float = 20.0
