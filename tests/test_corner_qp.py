@@ -1,4 +1,4 @@
-"""The package's corner QP (estimate.compliance.qp_split, the compiled solver, in the form of
+"""The package's corner QP (the compiled solver, via reference.corner_split.qp_split, in the form of
 the exact reference tests/reference/corner_qp.py) against daqp and the exact enumeration,
 known answers, degenerate input."""
 
@@ -141,8 +141,8 @@ def test_no_qp_library_imported_at_run_time() -> None:
     code = (
         "import sys, numpy as np\n"
         "import grfguard.estimate.vfs\n"
-        "from grfguard.estimate.compliance import qp_split\n"
-        "qp_split(np.eye(2)[None], np.ones((1, 2)), np.ones(1), 1e-6)\n"
+        "from grfguard.kernels.nnls import new_scratch, prior_qp\n"
+        "prior_qp(np.eye(2), np.ones(2), 2.0, 1e-3, 2, *new_scratch())\n"
         "print(sorted(m for m in ('quadprog', 'qpsolvers', 'daqp') if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

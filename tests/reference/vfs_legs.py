@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grfguard.estimate.compliance import qp_split
+from reference.corner_split import qp_split
 
 __all__ = [
     "corner_contact",

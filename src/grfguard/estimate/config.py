@@ -89,7 +89,7 @@ class VFSConfig:
     #: Include the centroidal angular momentum rate in the ZMP (multibody only).
     use_angular_momentum: bool = True
     #: Corner contact stiffness per kg of robot mass in [N/(m kg)] for the sole-compliance
-    #: prior of the corner QP (:mod:`grfguard.estimate.compliance`: lower corners carry
+    #: prior of the corner QP (:mod:`grfguard.kernels.nnls`: lower corners carry
     #: more load; recovers the internal forces between the feet that a rigid QP cannot
     #: see). MuJoCo's default soft contact measured 4.2e3 (SURALP 114 kg: 4.8e5 N/m; the
     #: 60 kg robot: 2.5e5 N/m); calibrate it for a real sole. 0 disables the prior.
