@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
+from grfguard.io.codes import codes_to_str, strings_to_str
 from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME, ZMP_REF
 from grfguard.kernels._jit import njit
 from grfguard.kernels.detect import (
@@ -660,28 +661,20 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     kinds = Y[:, o + 8:o + 16].astype(np.int64)
     for i in range(8):
         new[_FLAG_COLS[i]] = Y[:, o + i] != 0.0
-        new[_KIND_COLS[i]] = _KIND_OBJ[kinds[:, i]]
+        new[_KIND_COLS[i]] = codes_to_str(kinds[:, i], KIND_NAMES)
     for i in range(8):
         new[_REC_COLS[i]] = Y[:, o + 24 + i].copy()
         new[_ETA_COLS[i]] = Y[:, o + 16 + i].copy()
     if k.with_system:
         new["model_mismatch"] = Y[:, o + 33] != 0.0
-        new["model_mismatch_reason"] = _reasons(Y[:, o + 33:], k.vib_config)
+        new["model_mismatch_reason"] = _mismatch_reasons(Y[:, o + 33:], k.vib_config)
     codes = Y[:, o + 32].astype(np.int64)
-    new["system_state"] = _STATE_OBJ[codes]
-    reasons = np.full(n, "", dtype=object)
-    if (EX[:, 0] != 0.0).any():
-        rs = mon.inputs.clean_frame(log)[1]
-        reasons = np.array(rs, dtype=object)
-    t_raw = src[0]
-    for r in np.flatnonzero(codes != ST_OK):
-        reasons[r] = _reason(SYSTEM_STATES[codes[r]], float(t_raw[r]), float(EX[r, 1]),
-                             EX[r, 2] != 0.0, reasons[r])
-    new["system_reason"] = reasons
+    new["system_state"] = codes_to_str(codes, SYSTEM_STATES)
+    new["system_reason"] = _reasons(mon, log, codes, src[0], EX)
     return _with_columns(log, new)
 
 
-def _reasons(S: np.ndarray, vib_config: Any) -> np.ndarray:
+def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> np.ndarray:
     """``model_mismatch_reason`` of every row of the system columns ``S`` (one text per
     distinct row)."""
     out = np.full(S.shape[0], "", dtype=object)
@@ -695,11 +688,33 @@ def _reasons(S: np.ndarray, vib_config: Any) -> np.ndarray:
     return out
 
 
+def _reasons(mon: Any, log: pd.DataFrame, codes: np.ndarray, t_raw: np.ndarray,
+             EX: np.ndarray) -> Any:
+    """The ``system_reason`` column: empty where the state is ``ok``, text built only
+    for the other rows (no string object per row)."""
+    n = len(codes)
+    base: list[str] | None = None
+    if (EX[:, 0] != 0.0).any():
+        base = mon.inputs.clean_frame(log)[1]
+    rows = np.flatnonzero(codes != ST_OK)
+    if base is None and rows.size == 0:
+        return codes_to_str(np.zeros(n, dtype=np.int64), ("",))
+    texts = [_reason(SYSTEM_STATES[codes[r]], float(t_raw[r]), float(EX[r, 1]),
+                     EX[r, 2] != 0.0, base[r] if base is not None else "") for r in rows]
+    if base is None:  # names: "" and each text; codes point at them
+        idx = np.zeros(n, dtype=np.int64)
+        idx[rows] = np.arange(1, rows.size + 1)
+        return codes_to_str(idx, ("", *texts))
+    reasons = np.array(base, dtype=object)
+    reasons[rows] = texts
+    return strings_to_str(reasons)
+
+
 def _with_columns(log: pd.DataFrame, new: dict[str, Any]) -> pd.DataFrame:
     """A copy of ``log`` with the columns ``new`` (replaced in place when ``log`` has
     them, else appended in order), built in one go."""
     bare = log
-    add = pd.DataFrame(new, index=log.index)
+    add = pd.DataFrame(new, index=log.index, copy=False)  # fresh arrays: no copy needed
     if not any(c in bare.columns for c in new):
         return pd.concat([bare, add], axis=1)
     order = list(bare.columns) + [c for c in new if c not in bare.columns]
