@@ -42,7 +42,7 @@ import pandas as pd
 
 from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
 from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import njit_nort
 from grfguard.kernels.detect import (
     FLAG,
     G_PREV_INVALID,
@@ -119,7 +119,7 @@ def output_columns(with_vfs: bool) -> tuple[str, ...]:
     return (*OUT_COLUMNS, *det) if with_vfs else det
 
 
-@njit
+@njit_nort
 def _input_guard(xin, xc, mp, lims):
     """``InputGuard.clean_row``: ``xc`` = ``xin`` with implausible values NaN; True when
     something was rejected."""
@@ -142,7 +142,7 @@ def _input_guard(xin, xc, mp, lims):
     return rejected
 
 
-@njit
+@njit_nort
 def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
     """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break,
     or the row's precomputed columns); returns ``valid`` (``Monitor._valid``)."""
@@ -173,7 +173,7 @@ def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viw
     return (flag == 1.0) if math.isfinite(flag) else fin
 
 
-@njit
+@njit_nort
 def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     """``Monitor._prepare``: range check of the virtual forces, ``Continuity.after``,
     unusable virtual outputs set to NaN; returns ``(bounded, state code)``."""
@@ -210,7 +210,7 @@ def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     return bounded, ST_OK
 
 
-@njit
+@njit_nort
 def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
     """``Monitor._finish``: an implausible reading's flag reported as ``spikes``, the
     recovered force within the plausible range; writes the detector columns."""
@@ -233,7 +233,7 @@ def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
         yout[o + 24 + i] = r
 
 
-@njit
+@njit_nort
 def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
                  xc, vy, ws):
     """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
@@ -282,7 +282,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     ex[3] = 1.0 if bounded else 0.0
 
 
-@njit
+@njit_nort
 def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
                 ws):
     """:func:`monitor_step` over every row of ``X`` into ``Y`` and ``EX`` (the batch path)."""
@@ -431,7 +431,7 @@ class MonitorKernel:
         return Y, EX
 
 
-@njit
+@njit_nort
 def _unpack(F, I):
     n_in = I[28]
     ex = F[I[0]:I[0] + I[1]]
@@ -453,7 +453,7 @@ def _unpack(F, I):
     return ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws
 
 
-@njit
+@njit_nort
 def monitor_step_packed(x, y, F, I):
     """:func:`monitor_step` with every array in the two buffers of
     :class:`MonitorKernel` (``F`` floats, ``I`` ints with the layout header)."""
@@ -462,7 +462,7 @@ def monitor_step_packed(x, y, F, I):
                  ws)
 
 
-@njit
+@njit_nort
 def monitor_run_packed(X, Y, EX, F, I):
     """:func:`monitor_step_packed` over every row of ``X`` (the batch path)."""
     ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws = _unpack(F, I)
