@@ -1,4 +1,7 @@
-"""CoM and momentum estimators of the virtual force sensor.
+"""Reference (tests and benchmarks only; formerly ``grfguard.estimate.com``): CoM and
+momentum estimators of the virtual force sensor in numpy, compiled in
+:mod:`grfguard.kernels.vfs` (multibody, leg odometry) and :mod:`grfguard.kernels.vfs_paper`
+(the paper's LIPM filter, the pendulum Kalman ZMP, the anchor attitude).
 
 Two estimators, both producing the same quantities per sample: CoM ``c`` in world [m],
 CoM acceleration ``c_dd`` [m/s^2], centroidal angular momentum rate ``L_dot`` [N m],
@@ -32,7 +35,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.signal import butter, lfilter, lfilter_zi
 
 __all__ = [
     "CausalLowPass",
@@ -61,7 +63,9 @@ class CausalLowPass:
     """
 
     def __init__(self, cutoff_hz: float, dt_s: float, order: int, n_channels: int) -> None:
-        b, a = butter(order, cutoff_hz, btype="low", fs=1.0 / dt_s)
+        from grfguard._iir import butter_lowpass, lfilter_zi  # scipy's, without scipy.signal
+
+        b, a = butter_lowpass(order, cutoff_hz, 1.0 / dt_s)
         self.b, self.a = np.asarray(b, float), np.asarray(a, float)
         self.n_channels = n_channels
         self._zi = lfilter_zi(self.b, self.a)
@@ -76,6 +80,8 @@ class CausalLowPass:
         x = np.asarray(x, float)
         if self._z is None:
             self._z = self._zi[:, None] * x[None, :]
+        from scipy.signal import lfilter
+
         y, self._z = lfilter(self.b, self.a, x[None, :], axis=0, zi=self._z)
         return y[0]
 
@@ -86,6 +92,8 @@ class CausalLowPass:
             return x.copy()
         if self._z is None:
             self._z = self._zi[:, None] * x[0][None, :]
+        from scipy.signal import lfilter
+
         y, self._z = lfilter(self.b, self.a, x, axis=0, zi=self._z)
         return y
 
