@@ -569,7 +569,7 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     n = len(log)
     cols = list(k.in_cols)
     src = [(_column(log, c) if c in log.columns else None) for c in cols]
-    Y = np.empty((n, len(k.out_cols)))
+    Y = np.empty((n, len(k.out_cols)), order="F")  # columns contiguous: no copy each
     EX = np.empty((n, N_EX))
     X = np.empty((min(chunk, n), len(cols)))
     for a in range(0, n, chunk):
@@ -584,15 +584,15 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     o = 0
     if k.with_vfs:
         for j, c in enumerate(OUT_COLUMNS):
-            new[c] = Y[:, j].copy()
+            new[c] = Y[:, j]
         o = _NV
     kinds = Y[:, o + 8:o + 16].astype(np.int64)
     for i in range(8):
         new[_FLAG_COLS[i]] = Y[:, o + i] != 0.0
         new[_KIND_COLS[i]] = codes_to_str(kinds[:, i], KIND_NAMES)
     for i in range(8):
-        new[_REC_COLS[i]] = Y[:, o + 24 + i].copy()
-        new[_ETA_COLS[i]] = Y[:, o + 16 + i].copy()
+        new[_REC_COLS[i]] = Y[:, o + 24 + i]
+        new[_ETA_COLS[i]] = Y[:, o + 16 + i]
     codes = Y[:, o + 32].astype(np.int64)
     new["system_state"] = codes_to_str(codes, SYSTEM_STATES)
     new["system_reason"] = _reasons(mon, log, codes, src[0], EX)
