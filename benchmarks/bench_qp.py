@@ -2,12 +2,12 @@
 
 Measures, on walking-like data (seeded):
 
-* :func:`grfguard.estimate.compliance.qp_split` (the package's one corner QP, the
+* :func:`reference.corner_split.qp_split` (the package's one corner QP, the
   compiled solver of the virtual force sensor), on the paper split's per-foot QP (n = 4,
   fixed sole points) and the rigid 8-corner split (per-sample world points relative to
   the ZMP, contact masks), ns per sample in batch and µs per one-sample call; the exact
   free-set enumeration it replaced (``tests/reference/corner_qp.py``) for comparison;
-* :func:`grfguard.estimate.compliance.solve_with_prior`, the default split (8 corners,
+* :func:`reference.corner_split.solve_with_prior`, the default split (8 corners,
   sole-compliance prior), µs per one-sample call from Python;
 * the same QPs solved by daqp directly (``daqp.solve``, MIT; dev dependency) and through
   qpsolvers, µs per solve, and the largest force difference to grfguard;
@@ -37,11 +37,11 @@ from _common import BENCHMARKS_MD, update_section
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from exact_qp import package_qp as solve_corner_qp  # noqa: E402  (the package's solver)
-from grfguard.estimate.compliance import compliance_prior, solve_with_prior
 from grfguard.kernels._jit import njit
 from grfguard.kernels.nnls import new_scratch, prior_qp
 from grfguard.model.robot import SURALP
 from reference.corner_qp import solve_corner_qp as exact_corner_qp  # noqa: E402
+from reference.corner_split import compliance_prior, solve_with_prior  # noqa: E402
 
 SECTION = "## Contact-point QP"
 W_PAPER, W_DEFAULT = 1e-2, 1e-6  # [m²]
@@ -256,7 +256,7 @@ def _compliance_rows(rng: np.random.Generator, n: int, label: str, K: int,
 READING = """Reading (CPU times; the machine is shared, wall times are not comparable across
 rows). One solver serves every corner QP of the package: the compiled active-set solver
 ``grfguard.kernels.nnls.prior_qp``, inside the compiled virtual force sensor's step (where
-daqp cannot be called) and behind ``grfguard.estimate.compliance.qp_split`` for the Python
+daqp cannot be called) and behind ``reference.corner_split.qp_split`` for the Python
 stages (the compliance split of settings the kernel does not cover, the rigid split, the
 paper's per-foot split). In the compiled step it costs under 1.5 µs of CPU per solve (4 or
 8 corners) against 23-33 µs for one daqp call from Python; in batch it matches or beats the

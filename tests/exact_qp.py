@@ -3,7 +3,7 @@
 Dev dependency only: the package never imports it. Same problem as
 :mod:`grfguard.estimate.corner_qp`: ``min ‖C N - d‖² + w ‖N - N^p‖²`` s.t. ``N ≥ 0``,
 ``Σ N = b``, ``N_i = 0`` off the allowed points (``N^p = 0`` there; the prior ``N^p`` of
-:mod:`grfguard.estimate.compliance` otherwise); ``b ≤ 0`` gives zeros.
+:mod:`reference.corner_split` otherwise); ``b ≤ 0`` gives zeros.
 """
 
 from __future__ import annotations
@@ -41,12 +41,13 @@ def package_qp(
     w: float,
     allowed: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The package's corner QP (:func:`grfguard.estimate.compliance.qp_split`) in the form
-    of :func:`reference.corner_qp.solve_corner_qp`: points (n, 2) fixed or (T, n, 2),
+    """The package's corner QP (the compiled solver via
+    :func:`reference.corner_split.qp_split`) in the form of
+    :func:`reference.corner_qp.solve_corner_qp`: points (n, 2) fixed or (T, n, 2),
     ``d = F_z CoP`` (T, 2) [N m], totals (T,) [N]; the rigid / paper problem is the uniform
     prior ``F_z / n`` with the points taken relative to the CoP. A loaded sample with no
     allowed corner carries nothing (zeros), as in the virtual force sensor."""
-    from grfguard.estimate.compliance import qp_split
+    from reference.corner_split import qp_split
 
     b = np.asarray(total, float).reshape(-1)
     T = b.size

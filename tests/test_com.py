@@ -6,19 +6,15 @@ import mujoco
 import numpy as np
 import pytest
 
-from grfguard.estimate.com import (
+from grfguard.estimate.kinematic import KinematicModel, quat_to_matrix
+from grfguard.model.robot import SURALP
+from reference.vfs_com import (
     CausalLowPass,
     LegOdometry,
     PaperCoMFilter,
     zmp_from_momentum,
 )
-from grfguard.estimate.kinematic import (
-    AttitudeFilter,
-    KinematicModel,
-    angular_momentum_about_com,
-    quat_to_matrix,
-)
-from grfguard.model.robot import SURALP
+from reference.vfs_stages import AttitudeFilter, angular_momentum_about_com
 
 
 @pytest.fixture(scope="module")

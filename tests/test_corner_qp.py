@@ -1,4 +1,4 @@
-"""The package's corner QP (estimate.compliance.qp_split, the compiled solver, in the form of
+"""The package's corner QP (the compiled solver, via reference.corner_split.qp_split, in the form of
 the exact reference tests/reference/corner_qp.py) against daqp and the exact enumeration,
 known answers, degenerate input."""
 
@@ -141,8 +141,8 @@ def test_no_qp_library_imported_at_run_time() -> None:
     code = (
         "import sys, numpy as np\n"
         "import grfguard.estimate.vfs\n"
-        "from grfguard.estimate.compliance import qp_split\n"
-        "qp_split(np.eye(2)[None], np.ones((1, 2)), np.ones(1), 1e-6)\n"
+        "from grfguard.kernels.nnls import new_scratch, prior_qp\n"
+        "prior_qp(np.eye(2), np.ones(2), 2.0, 1e-3, 2, *new_scratch())\n"
         "print(sorted(m for m in ('quadprog', 'qpsolvers', 'daqp') if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -154,8 +154,7 @@ def test_compliance_split_is_the_exact_optimum_on_a_walk(monkeypatch) -> None:
     on the exact problem, on the samples of a simulated walk (single and double support):
     the forces agree to 1e-6 N (measured gap to an exact enumeration: 2e-9 N), the sum is
     exact and the objective is never worse than daqp's beyond rounding."""
-    import grfguard.estimate.vfs as vfs_mod
-    from grfguard.estimate.vfs import VirtualForceSensor
+    import reference.vfs_stages as vfs_mod
     from grfguard.sim import GaitConfig, NoiseConfig, simulate
 
     seen = {}
@@ -167,7 +166,7 @@ def test_compliance_split_is_the_exact_optimum_on_a_walk(monkeypatch) -> None:
 
     monkeypatch.setattr(vfs_mod, "split_with_prior", spy)
     log = simulate(gait=GaitConfig(duration=7.0), noise=NoiseConfig(), seed=2)
-    VirtualForceSensor.for_log(log, compiled=False).run(log)  # the Python stages' split
+    vfs_mod.PythonVFS.for_log(log).run(log)  # the Python stages' split
     corners, contact, zmp, total, w, k = seen["args"]
     ds = np.flatnonzero(contact.all(axis=1))
     ss = np.flatnonzero(contact.sum(axis=1) == 4)

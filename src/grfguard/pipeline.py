@@ -128,6 +128,13 @@ def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
     return pd.concat([keep, add], axis=1)[order]
 
 
+def _kernel_supports(cfg: Any) -> bool:
+    """The compiled virtual sensor covers ``cfg``."""
+    from grfguard.kernels.vfs import VFSKernel
+
+    return VFSKernel.supports(cfg)
+
+
 def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
     """Whether the log carries the gyro and the planned contact (the compiled virtual
     sensor's switches)."""
@@ -171,19 +178,16 @@ class _PreparedFrame(NamedTuple):
 
 
 def _compiled_or(vfs: Any) -> Any:
-    """``vfs`` with its kernels compiled or loaded now when it runs compiled; the same
-    sensor on the Python stages when the kernels cannot be built here (e.g. the cache
-    cannot be written: a warning, the run goes on)."""
+    """``vfs`` with its kernels loaded from the on-disk cache (or compiled) now; when that
+    fails here (e.g. the cache cannot be written) a warning, and numba compiles them in
+    memory at the first sample."""
     from grfguard.kernels import warm_up
 
-    if not vfs.compiled:
-        return vfs
     try:
         warm_up()
-    except Exception as exc:  # noqa: BLE001 - the compiled sensor is only faster
-        warnings.warn(f"compiled virtual force sensor unavailable ({exc}); using the "
-                      "Python stages", RuntimeWarning, stacklevel=3)
-        return type(vfs)(vfs.robot, vfs.config, vfs.kin, compiled=False)
+    except Exception as exc:  # noqa: BLE001 - compiled in memory at the first call instead
+        warnings.warn(f"the compiled kernels could not be loaded or cached ({exc}); they "
+                      "compile in memory at the first sample", RuntimeWarning, stacklevel=3)
     return vfs
 
 
@@ -282,10 +286,10 @@ class Monitor:
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
         the robot (physical ranges) from ``log.attrs``.
 
-        The virtual sensor is the compiled one (:mod:`grfguard.kernels`, same outputs to
-        about 1e-10 N) when it covers ``config.vfs`` and ``compiled`` (default
-        ``config.compiled``, True) is not False; its machine code is loaded from the
-        on-disk cache here (1-2 s once per process; about 35 s once per fresh install)."""
+        The virtual sensor is the compiled one (:mod:`grfguard.kernels`; every
+        ``config.vfs``); its machine code is loaded from the on-disk cache here (1-2 s once
+        per process; about 35 s once per fresh install). ``compiled=False`` runs the
+        detector's pure-Python stages around it."""
         from grfguard.calib.selfcal import robot_of
 
         cfg = config_for_log(log, config)
@@ -296,8 +300,7 @@ class Monitor:
         if not has_vfs:
             from grfguard.estimate.vfs import VirtualForceSensor
 
-            vfs = _compiled_or(VirtualForceSensor.for_log(
-                log, cfg.vfs, compiled=cfg.compiled if compiled is None else compiled))
+            vfs = _compiled_or(VirtualForceSensor.for_log(log, cfg.vfs))
         try:
             robot = robot_of(log)
         except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
@@ -323,14 +326,18 @@ class Monitor:
             return "compiled=False"
         if self.config.method != "default":
             return f"method {self.config.method!r}"
-        if self.common is not None:
-            return "the common-mode layer"
+        if self.vfs_quiet is not None and not (
+                getattr(self.vfs, "compiled", False) and hasattr(self.vfs_quiet, "kernel")
+                and _kernel_supports(self.vfs_quiet.config)):
+            return "the vibration twin's virtual force sensor settings"
         if self.config.diagnostics:
             return "diagnostics"
         if self.vfs is None:
             return ""
         if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
             return "a pure-Python virtual force sensor"
+        if getattr(getattr(self.vfs, "config", None), "com_method", "") == "paper":
+            return "the paper's CoM filter (its sensor reads the force sensors)"
         return ""
 
     def _kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
@@ -352,7 +359,12 @@ class Monitor:
                 prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
                                     self.guard, (self.inputs.force_lo, self.inputs.force_hi))
                 vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
-                k = MonitorKernel(prm, self.inputs, vk, self.standing)
+                system = None
+                if self.common is not None:  # the system layer (kernels/system.py)
+                    qk = (self.vfs_quiet.kernel(has_gyro, has_ref)
+                          if self.vfs_quiet is not None else None)
+                    system = (self, has_gyro, qk)
+                k = MonitorKernel(prm, self.inputs, vk, self.standing, system)
             except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
                 warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
                               "stages", RuntimeWarning, stacklevel=3)
@@ -632,7 +644,7 @@ class Monitor:
         ``contact_est_*``, ``vfs_valid`` (:mod:`grfguard.kernels.monitor`)."""
         from grfguard.kernels.monitor import input_columns
 
-        return input_columns(self.vfs is not None)
+        return input_columns(self.vfs is not None, self.common is not None)
 
     @property
     def output_columns(self) -> tuple[str, ...]:
@@ -643,7 +655,7 @@ class Monitor:
         :data:`grfguard.guard.SYSTEM_STATES`)."""
         from grfguard.kernels.monitor import output_columns
 
-        return output_columns(self.vfs is not None)
+        return output_columns(self.vfs is not None, self.common is not None)
 
     def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """One sample as arrays (the fast streaming call): ``x`` in

@@ -1,6 +1,7 @@
 r"""Reference (tests and benchmarks only; formerly ``grfguard.estimate.corner_qp``): the exact
 corner-force QP of the rigid and the paper split (the paper's eq. 13-23, corrected). The
-package solves these with :func:`grfguard.estimate.compliance.qp_split`.
+package solves these with :func:`grfguard.kernels.nnls.prior_qp` (batch form:
+:func:`reference.corner_split.qp_split`).
 
 ``n`` contact points ``p_i = (x_i, y_i)`` in one planar frame, ``T`` samples:
 

@@ -78,7 +78,7 @@ class VFSConfig:
     anchor_attitude_time_constant: float = 0.0
     #: ZMP from the multibody rates: ``direct`` (Newton-Euler with the filtered rates) or
     #: ``kalman`` (pendulum Kalman filter with the ZMP as a state on the kinematic CoM,
-    #: :class:`grfguard.estimate.com.ZMPKalmanFilter`; best without accelerometer).
+    #: :func:`grfguard.kernels.vfs_paper.zmp_kalman`; best without accelerometer).
     zmp_filter: str = "direct"
     #: Spectral density of the ZMP velocity random walk of that filter in [m^2/s].
     zmp_rate_psd: float = 20.0
@@ -89,7 +89,7 @@ class VFSConfig:
     #: Include the centroidal angular momentum rate in the ZMP (multibody only).
     use_angular_momentum: bool = True
     #: Corner contact stiffness per kg of robot mass in [N/(m kg)] for the sole-compliance
-    #: prior of the corner QP (:mod:`grfguard.estimate.compliance`: lower corners carry
+    #: prior of the corner QP (:mod:`grfguard.kernels.nnls`: lower corners carry
     #: more load; recovers the internal forces between the feet that a rigid QP cannot
     #: see). MuJoCo's default soft contact measured 4.2e3 (SURALP 114 kg: 4.8e5 N/m; the
     #: 60 kg robot: 2.5e5 N/m); calibrate it for a real sole. 0 disables the prior.

@@ -4,7 +4,9 @@ Everything here reads only the joint encoders and the IMU attitude (never the fo
 sensors). The free-floating base is put at the origin with the IMU attitude, so every
 position is expressed in a frame ``A`` with world orientation and origin at the trunk
 (``p_A* = p_W* - p_WT``). The trunk position in world comes later from leg odometry
-(:mod:`grfguard.estimate.com`).
+(the compiled sensor, :mod:`grfguard.kernels.vfs`, which reads the kinematic tree, the
+site and joint indices and the masses from :class:`KinematicModel`; :meth:`KinematicModel.forward`
+is the one-sample MuJoCo kinematics, e.g. for the IMU mounting-tilt learner).
 
 Notation: ``p_AC`` CoM in frame A [m]; ``p_AK`` contact points (lowest point of each corner
 sphere) in A [m]; ``R_WB`` body rotations (A and W share their orientation).
@@ -12,7 +14,6 @@ sphere) in A [m]; ``R_WB`` body rotations (A and W share their orientation).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import mujoco
@@ -20,12 +21,9 @@ import numpy as np
 
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINT_NAMES, SIDES, RobotConfig
-from grfguard.rotations import quat_exp, quat_mul, quat_to_matrix
+from grfguard.rotations import quat_to_matrix
 
-__all__ = [
-    "rotate_frames",
-    "AttitudeFilter",
-    "KinematicModel", "KinematicFrames", "angular_momentum_about_com", "quat_to_matrix"]
+__all__ = ["KinematicModel", "KinematicFrames", "quat_to_matrix"]
 
 
 @dataclass
@@ -142,155 +140,3 @@ class KinematicModel:
             R_WS=np.array(d.site_xmat[self.sole_sites]).reshape(-1, 3, 3),
             p_AI=np.array(d.site_xpos[self.imu_site]),
         )
-
-    # ------------------------------------------------------------------ batch
-    def forward_batch(self, q_rad: np.ndarray, quat_imu_wxyz: np.ndarray) -> KinematicFrames:
-        """Kinematics of ``T`` samples (a loop over :meth:`forward`, 5-10 us per sample).
-
-        Args:
-            q_rad: (T, 12) joint angles [rad].
-            quat_imu_wxyz: (T, 4) IMU attitudes.
-        """
-        n = q_rad.shape[0]
-        nb = self.body_ids.size
-        out = KinematicFrames(
-            p_AC=np.empty((n, 3)),
-            p_AB=np.empty((n, nb, 3)),
-            R_WB=np.empty((n, nb, 3, 3)),
-            p_AK=np.empty((n, 8, 3)),
-            p_AS=np.empty((n, 2, 3)),
-            R_WS=np.empty((n, 2, 3, 3)),
-            p_AI=np.empty((n, 3)),
-        )
-        for i in range(n):
-            f = self.forward(q_rad[i], quat_imu_wxyz[i])
-            out.p_AC[i] = f.p_AC
-            out.p_AB[i] = f.p_AB
-            out.R_WB[i] = f.R_WB
-            out.p_AK[i] = f.p_AK
-            out.p_AS[i] = f.p_AS
-            out.R_WS[i] = f.R_WS
-            out.p_AI[i] = f.p_AI
-        return out
-
-
-def angular_momentum_about_com(
-    p_AB: np.ndarray,
-    R_WB: np.ndarray,
-    p_AB_prev: np.ndarray,
-    R_WB_prev: np.ndarray,
-    body_mass_kg: np.ndarray,
-    body_inertia: np.ndarray,
-    dt_s: float,
-) -> np.ndarray:
-    """Centroidal angular momentum from two consecutive body poses (backward differences).
-
-    ``L = sum_i m_i (p_i - c) x v_i + R_i I_i R_i^T w_i`` with ``v_i = (p_i - p_i') / dt`` and
-    ``w_i = vee(R_i R_i'^T - R_i' R_i^T) / (2 dt)``. A common translation of every body (the
-    unknown trunk position) cancels, so positions in frame A suffice.
-
-    Args:
-        p_AB: (..., nb, 3) body CoM positions now [m].
-        R_WB: (..., nb, 3, 3) body rotations now.
-        p_AB_prev: same one sample earlier.
-        R_WB_prev: same one sample earlier.
-        body_mass_kg: (nb,) masses [kg].
-        body_inertia: (nb, 3) principal inertias [kg m^2].
-        dt_s: Sampling period [s].
-
-    Returns:
-        (..., 3) angular momentum about the CoM in world axes [kg m^2/s].
-    """
-    m = body_mass_kg[:, None]
-    c = (p_AB * m).sum(axis=-2, keepdims=True) / body_mass_kg.sum()
-    v = (p_AB - p_AB_prev) / dt_s
-    lin = (np.cross(p_AB - c, v) * m).sum(axis=-2)
-    dR = R_WB @ np.swapaxes(R_WB_prev, -1, -2)
-    w = np.stack(
-        [
-            dR[..., 2, 1] - dR[..., 1, 2],
-            dR[..., 0, 2] - dR[..., 2, 0],
-            dR[..., 1, 0] - dR[..., 0, 1],
-        ],
-        axis=-1,
-    ) / (2.0 * dt_s)
-    # I_W w = R diag(I) R^T w
-    w_B = np.einsum("...ji,...j->...i", R_WB, w)
-    rot = np.einsum("...ij,...j->...i", R_WB, w_B * body_inertia).sum(axis=-2)
-    return lin + rot
-
-
-class AttitudeFilter:
-    """Complementary attitude filter: gyro integration pulled slowly toward the IMU quaternion.
-
-    The attitude estimator's quaternion in the log carries white jitter (about 1 mrad) that
-    finite differences turn into large fake accelerations; the gyro is smooth. Per sample::
-
-        q <- q (x) Exp(w dt)                        (gyro, IMU frame)
-        q <- q (x) Exp(k Log(q^-1 (x) q_meas)),     k = dt / (tau + dt)
-
-    so the result follows the gyro above ``1 / (2 pi tau)`` and the logged attitude (and
-    its gyro-bias-free drift correction) below.
-
-    Args:
-        dt_s: Sampling period [s].
-        time_constant_s: ``tau`` [s]; 0 returns the logged quaternion unchanged.
-    """
-
-    def __init__(self, dt_s: float, time_constant_s: float) -> None:
-        self.dt = dt_s
-        self.k = dt_s / (time_constant_s + dt_s) if time_constant_s > 0 else 1.0
-        self.q: tuple[float, float, float, float] | None = None
-
-    def reset(self) -> None:
-        """Forget the state."""
-        self.q = None
-
-    def update(self, quat_meas_wxyz: np.ndarray, gyro_rad_s: np.ndarray | None) -> np.ndarray:
-        """One sample: filtered attitude (4,) ``w, x, y, z``."""
-        w, x, y, z = (float(v) for v in quat_meas_wxyz)
-        nm = math.sqrt(w * w + x * x + y * y + z * z)
-        qm = (w / nm, x / nm, y / nm, z / nm)
-        if self.q is None or self.k >= 1.0 or gyro_rad_s is None:
-            self.q = qm
-            return np.array(qm)
-        dt = self.dt
-        gx, gy, gz = (float(v) * dt for v in gyro_rad_s)
-        q = quat_mul(self.q, quat_exp(gx, gy, gz))
-        e = quat_mul((q[0], -q[1], -q[2], -q[3]), qm)
-        sgn = 2.0 * self.k if e[0] >= 0 else -2.0 * self.k
-        q = quat_mul(q, quat_exp(sgn * e[1], sgn * e[2], sgn * e[3]))
-        n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        self.q = (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-        return np.array(self.q)
-
-def rotate_frames(fr: KinematicFrames, R: np.ndarray) -> KinematicFrames:
-    """Rotate every vector and orientation of ``fr`` by ``R`` ((3, 3) or (T, 3, 3))."""
-    R = np.asarray(R, float)
-    if R.ndim == 2:
-
-        def vec(x: np.ndarray) -> np.ndarray:
-            return x @ R.T
-
-        def rot(x: np.ndarray) -> np.ndarray:
-            return R @ x
-
-    else:
-
-        def vec(x: np.ndarray) -> np.ndarray:
-            if x.ndim == 2:
-                return np.einsum("tij,tj->ti", R, x)
-            return np.einsum("tij,tkj->tki", R, x)
-
-        def rot(x: np.ndarray) -> np.ndarray:
-            return np.einsum("tij,tkjl->tkil", R, x)
-
-    return KinematicFrames(
-        p_AC=vec(fr.p_AC),
-        p_AB=vec(fr.p_AB),
-        R_WB=rot(fr.R_WB),
-        p_AK=vec(fr.p_AK),
-        p_AS=vec(fr.p_AS),
-        R_WS=rot(fr.R_WS),
-        p_AI=vec(fr.p_AI),
-    )

@@ -1,37 +1,32 @@
 """The virtual force sensor (VFS): corner forces from IMU, encoders and the robot model.
 
-Pipeline (DESIGN.md, "Pipeline"):
+Pipeline (DESIGN.md, "Pipeline"), one compiled step per sample
+(:func:`grfguard.kernels.vfs.vfs_step`, the non-default settings' stages in
+:mod:`grfguard.kernels.vfs_paper`):
 
-1. attitude (:class:`grfguard.estimate.kinematic.AttitudeFilter`): gyro integration pulled
-   toward the logged IMU quaternion (its 1 mrad jitter would become fake accelerations);
-2. kinematics (:mod:`grfguard.estimate.kinematic`): whole-body CoM, body poses, corner
-   points relative to the trunk, from the encoders and that attitude;
-3. leg odometry (:class:`grfguard.estimate.com.LegOdometry`): trunk position in world,
-   anchored on a flat stance foot;
-4. momentum (:mod:`grfguard.estimate.com`): ``multibody`` (default, sensor-free): CoM
-   acceleration = accelerometer (above 1 Hz) + odometry (below) + kinematic CoM motion
-   relative to the IMU (15 Hz Butterworth), centroidal angular-momentum rate by finite
-   differences (15 Hz), ZMP by Newton-Euler; or the paper's LIPM Kalman filter (``paper``,
-   reads the force sensors through the measured ZMP);
-5. split (:mod:`grfguard.estimate.legs`, :mod:`grfguard.estimate.compliance`): contact per
-   corner from the kinematic heights, one QP over all corners in contact with the total
-   force, the ZMP and a sole-compliance prior (``qp``, default; the rigid QP of
-   :func:`grfguard.estimate.compliance.qp_split` without the prior), or the paper's alpha
-   rule and eq. 10-12 (``paper``, per-foot QPs by the same solver).
+1. attitude: gyro integration pulled toward the logged IMU quaternion (its 1 mrad jitter
+   would become fake accelerations);
+2. kinematics (:mod:`grfguard.kernels.fk` over :class:`grfguard.estimate.kinematic.KinematicModel`):
+   whole-body CoM, body poses, corner points relative to the trunk, from the encoders and
+   that attitude;
+3. leg odometry: trunk position in world, anchored on a flat stance foot (optionally with
+   the anchored sole's attitude, ``anchor_attitude_time_constant``);
+4. momentum: ``multibody`` (default, sensor-free): CoM acceleration = accelerometer
+   (above 1 Hz) + odometry (below) + kinematic CoM motion relative to the IMU (15 Hz
+   Butterworth), centroidal angular-momentum rate by finite differences (15 Hz), ZMP by
+   Newton-Euler (or a pendulum Kalman filter, ``zmp_filter="kalman"``); or the paper's
+   LIPM Kalman filter (``com_method="paper"``, reads the force sensors through the
+   measured ZMP);
+5. split: contact per corner from the kinematic heights, one QP over all corners in
+   contact with the total force, the ZMP and a sole-compliance prior (``qp``, default;
+   ``contact_stiffness_per_kg = 0``: the rigid QP), or the paper's alpha rule and
+   eq. 10-12 (``paper``, per-foot QPs by the same solver).
 
-One implementation, two engines. The default settings (and every setting
-:meth:`grfguard.kernels.vfs.VFSKernel.supports`) run the compiled step of
-:mod:`grfguard.kernels.vfs`: one numba function per sample, called once per ``update`` and
-looped over the log in one compiled call by ``run``, so streaming and batch are identical
-by construction. The settings the kernel does not cover (the paper's CoM filter and split,
-the pendulum Kalman ZMP, the anchor attitude) and ``compiled=False`` run the Python stages
-below: stage methods over ``(T, ...)`` arrays (``_attitude``, ``forward_batch``,
-``_odometry``, ``_momentum`` or ``_paper_momentum``, ``_split``, wired by ``_process``),
-batched by ``run`` (T = the whole log) and streamed by ``update`` (T = 1); stateful stages
-carry their state between calls. Both engines use the same corner-QP solver and agree
-bit for bit on the tested walks (``tests/test_one_vfs.py``). A sample with a non-finite
-input is skipped (the state does not move), the last output is held and ``vfs_valid``
-is 0.
+``update`` calls the step once per sample and ``run`` loops it over the log in one
+compiled call, so streaming and batch are identical by construction. A sample with a
+non-finite input is skipped (the state does not move), the last output is held and
+``vfs_valid`` is 0. The numpy implementation of every stage, the reference the kernel is
+tested against to 1e-9 N, is ``tests/reference/vfs_stages.py`` (not shipped).
 
 Outputs: ``vfs_<s>`` for r1..r4, l1..l4 [N], ``com_est_x/y/z`` [m], ``vfs_total_r/l`` [N],
 ``vfs_cop_r_x/y``, ``vfs_cop_l_x/y`` [m, world; NaN when the foot carries < 1 N],
@@ -41,52 +36,24 @@ Outputs: ``vfs_<s>`` for r1..r4, l1..l4 [N], ``com_est_x/y/z`` [m], ``vfs_total_
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from grfguard.errors import LogFormatError
-from grfguard.estimate.com import (
-    CausalLowPass,
-    LegOdometry,
-    PaperCoMFilter,
-    ZMPKalmanFilter,
-    zmp_from_momentum,
-)
-from grfguard.estimate.compliance import split_with_prior
+from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
-from grfguard.estimate.kinematic import (
-    AttitudeFilter,
-    KinematicFrames,
-    KinematicModel,
-    angular_momentum_about_com,
-    rotate_frames,
-)
-from grfguard.estimate.legs import (
-    corner_contact,
-    paper_alpha,
-    paper_cop_literal,
-    paper_leg_forces,
-    split_paper_feet,
-    split_qp,
-    world_to_foot_xy,
-)
+from grfguard.estimate.kinematic import KinematicModel
 from grfguard.io.schema import (
     COM_EST_COLUMNS,
-    CONTACT_REF,
     FORCE_COLUMNS,
     IMU_ACC,
-    IMU_GYRO,
     IMU_QUAT,
     JOINT_COLUMNS,
     TIME,
-    ZMP_REF,
     vfs_col,
 )
-from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
-from grfguard.rotations import quat_to_matrix
+from grfguard.model.robot import SENSOR_NAMES, RobotConfig
 
 __all__ = ["VFSConfig", "VirtualForceSensor", "VFS_OUTPUT_COLUMNS", "with_vfs_columns"]
 
@@ -107,14 +74,14 @@ VFS_OUTPUT_COLUMNS: tuple[str, ...] = (
     "zmp_est_y",
     "vfs_valid",
 )
-_MIN_FOOT_FORCE_N = 1.0
 
 
-def _in_columns() -> tuple[str, ...]:
-    """Input row layout of the compiled kernel (:data:`grfguard.kernels.vfs.IN_COLUMNS`)."""
-    from grfguard.kernels.vfs import IN_COLUMNS
+def _in_columns(cfg: VFSConfig) -> tuple[str, ...]:
+    """Input row layout of the compiled kernel (:data:`grfguard.kernels.vfs.IN_COLUMNS`,
+    with the force sensors and the planned ZMP for the paper's CoM filter)."""
+    from grfguard.kernels.vfs import IN_COLUMNS, PAPER_IN_COLUMNS
 
-    return IN_COLUMNS
+    return PAPER_IN_COLUMNS if cfg.com_method == "paper" else IN_COLUMNS
 
 
 def _robot_from_attrs(attrs: Mapping[str, Any]) -> RobotConfig:
@@ -135,65 +102,6 @@ def _robot_from_attrs(attrs: Mapping[str, Any]) -> RobotConfig:
     return RobotConfig.from_dict(dict(r))
 
 
-def _outputs(
-    forces: np.ndarray,
-    p_WK_xy: np.ndarray,
-    com: np.ndarray,
-    contact_feet: np.ndarray,
-    zmp: np.ndarray,
-) -> dict[str, np.ndarray]:
-    """Derived per-foot outputs (vectorized over a leading axis)."""
-    out: dict[str, np.ndarray] = {}
-    for j, s in enumerate(SENSOR_NAMES):
-        out[vfs_col(s)] = forces[..., j]
-    for j, c in enumerate(COM_EST_COLUMNS):
-        out[c] = com[..., j]
-    for i, side in enumerate(SIDES):
-        f = forces[..., 4 * i : 4 * i + 4]
-        tot = f.sum(axis=-1)
-        out[f"vfs_total_{side}"] = tot
-        pts = p_WK_xy[..., 4 * i : 4 * i + 4, :]
-        ok = tot >= _MIN_FOOT_FORCE_N
-        safe = np.where(ok, tot, 1.0)
-        for a, ax in enumerate("xy"):
-            cop = (f * pts[..., a]).sum(axis=-1) / safe
-            out[f"vfs_cop_{side}_{ax}"] = np.where(ok, cop, np.nan)
-    out["contact_est_r"] = contact_feet[..., 0].astype(float)
-    out["contact_est_l"] = contact_feet[..., 1].astype(float)
-    out["zmp_est_x"] = zmp[..., 0]
-    out["zmp_est_y"] = zmp[..., 1]
-    return out
-
-
-@dataclass
-class _Inputs:
-    """The inputs of T samples, (T, k) arrays; optional ones None when absent."""
-
-    q: np.ndarray  # joint angles [rad]
-    quat: np.ndarray  # IMU attitude (w, x, y, z)
-    gyro: np.ndarray | None  # [rad/s]
-    stance: np.ndarray | None  # planned contact (right, left), 0/1
-    acc: np.ndarray | None  # IMU specific force [m/s^2]
-    forces: np.ndarray | None  # corner force sensors [N] (the paper's CoM filter only)
-    zmp_ref: np.ndarray | None  # planned ZMP [m] (the paper's CoM filter only)
-
-    def valid(self) -> np.ndarray:
-        """(T,) samples whose inputs are all finite with a non-zero quaternion.
-
-        The planned ZMP is optional (non-finite: not used) and does not count.
-        """
-        parts = [self.q, self.quat] + [
-            p for p in (self.gyro, self.stance, self.acc, self.forces) if p is not None
-        ]
-        ok = np.all(np.concatenate([np.isfinite(p) for p in parts], axis=1), axis=1)
-        return ok & (np.linalg.norm(np.nan_to_num(self.quat), axis=1) >= 1e-6)
-
-    def take(self, idx: np.ndarray) -> _Inputs:
-        """The samples ``idx``."""
-        vals = (getattr(self, f.name) for f in fields(self))
-        return _Inputs(*(None if v is None else v[idx] for v in vals))
-
-
 class VirtualForceSensor:
     """Virtual foot force sensor, streaming (``update``, ``update_array``) and batch (``run``).
 
@@ -201,15 +109,17 @@ class VirtualForceSensor:
         robot: Robot description.
         config: Settings (default :class:`VFSConfig`).
         kinematics: Optional prebuilt :class:`KinematicModel` (shares the MuJoCo model).
-        compiled: Run the compiled kernel (:mod:`grfguard.kernels.vfs`) when it covers
-            ``config`` (the default); False runs the Python stages (slow; the reference
-            the kernel is tested against). :attr:`compiled` says which engine runs.
+        compiled: Must be True (the former ``False``, the pure-Python stages, is the test
+            reference ``tests/reference/vfs_stages.py``).
+
+    Raises:
+        ConfigError: ``compiled=False``.
 
     Example:
         >>> vfs = VirtualForceSensor.for_log(log)
         >>> out = vfs.run(log)          # DataFrame with vfs_r1 ... vfs_l4
         >>> vfs.reset(); row_out = vfs.update(log.iloc[0].to_dict())
-        >>> y = vfs.update_array(x)     # x in kernels.vfs.IN_COLUMNS order (compiled only)
+        >>> y = vfs.update_array(x)     # x in kernels.vfs.IN_COLUMNS order
     """
 
     def __init__(
@@ -219,8 +129,13 @@ class VirtualForceSensor:
         kinematics: KinematicModel | None = None,
         compiled: bool = True,
     ) -> None:
-        from grfguard.kernels.vfs import VFSKernel
-
+        if not compiled:
+            raise ConfigError(
+                "VirtualForceSensor(compiled=False) was removed: every setting runs the "
+                "compiled kernel (grfguard.kernels.vfs); the pure-Python stages are the test "
+                "reference tests/reference/vfs_stages.py (PythonVFS). For the pure-Python "
+                "detector use Monitor(..., compiled=False)."
+            )
         self.robot = robot if robot is not None else RobotConfig()
         self.config = config if config is not None else VFSConfig()
         self.kin = kinematics if kinematics is not None else KinematicModel(self.robot)
@@ -229,10 +144,11 @@ class VirtualForceSensor:
         self.points_F = self.robot.sensor_positions_in_foot()
         #: Corner contact stiffness of the compliance prior [N/m] (0: rigid QP).
         self.contact_stiffness = self.config.contact_stiffness_per_kg * self.mass
-        #: True when the compiled kernel runs (``compiled`` and the settings covered).
-        self.compiled = bool(compiled) and VFSKernel.supports(self.config)
+        #: Always True: the compiled kernel runs every setting.
+        self.compiled = True
         self._kern: dict[tuple[bool, bool], Any] = {}
-        self._x = np.empty(len(_in_columns()))
+        self._in_cols = _in_columns(self.config)
+        self._x = np.empty(len(self._in_cols))
         self._y = np.empty(len(VFS_OUTPUT_COLUMNS))
         self.reset()
 
@@ -253,11 +169,7 @@ class VirtualForceSensor:
 
     def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
         """The compiled kernel (:class:`grfguard.kernels.vfs.VFSKernel`) for inputs with /
-        without the gyro and the planned contact (built once, kept).
-
-        Raises:
-            ConfigError: The kernel does not cover the settings.
-        """
+        without the gyro and the planned contact (built once, kept)."""
         key = (has_gyro, has_ref)
         if key not in self._kern:
             from grfguard.kernels.vfs import VFSKernel  # (here: an import costs ~1 us/call)
@@ -269,19 +181,6 @@ class VirtualForceSensor:
         """Forget all state (odometry anchor, filters, previous samples)."""
         for k in self._kern.values():
             k.reset()
-        c = self.config
-        self._odo = LegOdometry(c.contact_height, c.dt, c.anchor_attitude_time_constant)
-        self._att = AttitudeFilter(c.dt, c.attitude_time_constant)
-        self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 9)
-        self._lp_fuse = CausalLowPass(c.fusion_cutoff, c.dt, c.filter_order, 3)
-        self._lp_acc = CausalLowPass(c.acc_cutoff, c.dt, c.filter_order, 3)
-        self._hist: dict[str, np.ndarray] = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
-        self._prev_frames: KinematicFrames | None = None
-        self._prev_L: np.ndarray | None = None
-        self._paper: PaperCoMFilter | None = None
-        self._zkf = ZMPKalmanFilter(c.dt, c.zmp_rate_psd, c.com_acc_psd, c.com_sigma)
-        self._p_act_prev: np.ndarray | None = None
-        self._last: dict[str, float] | None = None
 
     # ------------------------------------------------------------------ inputs
     def check_columns(self, cols: Any) -> None:
@@ -298,47 +197,9 @@ class VirtualForceSensor:
                 "in grfguard.io.schema (com_method='paper' also needs imu_acc_* and force_*)"
             )
 
-    def _inputs(self, src: pd.DataFrame | Mapping[str, float]) -> _Inputs:
-        """Parse a log (T rows) or one sample (a mapping, T = 1) into (T, k) arrays.
-
-        Raises:
-            KeyError, TypeError, ValueError: A mapping misses a needed key or has a
-                non-numeric value (``update`` then holds its last output).
-        """
-        c = self.config
-        frame = isinstance(src, pd.DataFrame)
-        has = (lambda cols: all(k in src.columns for k in cols)) if frame else (
-            lambda cols: all(k in src for k in cols)
-        )
-
-        def take(cols: tuple[str, ...]) -> np.ndarray:
-            if frame:
-                return src[list(cols)].to_numpy(float)
-            return np.array([[float(src[k]) for k in cols]])
-
-        paper = c.com_method == "paper"
-        inp = _Inputs(
-            q=take(JOINT_COLUMNS),
-            quat=take(IMU_QUAT),
-            gyro=take(IMU_GYRO) if has(IMU_GYRO) else None,
-            stance=take(CONTACT_REF) if has(CONTACT_REF) else None,
-            acc=take(IMU_ACC) if paper or c.use_accelerometer else None,
-            forces=take(FORCE_COLUMNS) if paper else None,
-            zmp_ref=None,
-        )
-        if paper:
-            n = inp.q.shape[0]
-            inp.zmp_ref = take(ZMP_REF) if has(ZMP_REF) else np.full((n, 2), np.nan)
-        return inp
-
-    def _stance_fallback(self, p_AK: np.ndarray) -> np.ndarray:
-        """Planned stance when the log has no contact_ref: feet within 1 cm of the lowest."""
-        z = p_AK[..., 2].reshape(p_AK.shape[:-2] + (2, 4)).min(axis=-1)
-        return z - z.min(axis=-1, keepdims=True) < 0.01
-
     # ------------------------------------------------------------------ streaming
     def update(self, row: Mapping[str, float]) -> dict[str, float]:
-        """Process one sample: the stages of :meth:`run` with T = 1.
+        """Process one sample (the compiled step of :meth:`run`).
 
         Args:
             row: Mapping with the log-contract columns of one sample.
@@ -348,50 +209,30 @@ class VirtualForceSensor:
             non-finite input is skipped: the last output is returned with
             ``vfs_valid = 0`` (NaN before the first valid sample).
         """
-        if self.compiled:
-            x = self._x
-            for i, c in enumerate(_in_columns()):
-                try:
-                    x[i] = float(row[c])
-                except (KeyError, TypeError, ValueError):
-                    x[i] = np.nan
-            y = self.kernel().step(x, self._y)
-            return dict(zip(VFS_OUTPUT_COLUMNS, y.tolist(), strict=True))
-        try:
-            inp = self._inputs(row)
-        except (KeyError, TypeError, ValueError):
-            return self._hold()
-        if not inp.valid()[0]:
-            return self._hold()
-        out = self._process(inp)
-        res = {k: float(v[0]) for k, v in out.items()}
-        res["vfs_valid"] = 1.0
-        self._last = res
-        return dict(res)
+        x = self._x
+        for i, c in enumerate(self._in_cols):
+            try:
+                x[i] = float(row[c])
+            except (KeyError, TypeError, ValueError):
+                x[i] = np.nan
+        y = self.kernel().step(x, self._y)
+        return dict(zip(VFS_OUTPUT_COLUMNS, y.tolist(), strict=True))
 
     def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
-        """One sample as arrays (compiled engine): ``x`` (24,) in
-        :data:`grfguard.kernels.vfs.IN_COLUMNS` order -> (22,) in :data:`VFS_OUTPUT_COLUMNS`
-        order (written into ``y`` when given). Never raises on a bad sample (non-finite
-        input: last output held, ``vfs_valid = 0``).
+        """One sample as arrays: ``x`` (24,) in :data:`grfguard.kernels.vfs.IN_COLUMNS`
+        order (34, :data:`~grfguard.kernels.vfs.PAPER_IN_COLUMNS`, for the paper's CoM
+        filter) -> (22,) in :data:`VFS_OUTPUT_COLUMNS` order (written into ``y`` when
+        given). Never raises on a bad sample (non-finite input: last output held,
+        ``vfs_valid = 0``).
 
         Raises:
-            ConfigError: The kernel does not cover the settings.
             LogFormatError: ``x`` or ``y`` has the wrong shape.
         """
         return self.kernel().step(x, np.empty(len(VFS_OUTPUT_COLUMNS)) if y is None else y)
 
-    def _hold(self) -> dict[str, float]:
-        if self._last is None:
-            res = {k: float("nan") for k in VFS_OUTPUT_COLUMNS}
-        else:
-            res = dict(self._last)
-        res["vfs_valid"] = 0.0
-        return res
-
     # ------------------------------------------------------------------ batch
     def run(self, log: pd.DataFrame) -> pd.DataFrame:
-        """Reset, then process the whole log (vectorized where it pays).
+        """Reset, then process the whole log (the step looped in one compiled call).
 
         Args:
             log: Log-contract DataFrame.
@@ -401,33 +242,13 @@ class VirtualForceSensor:
         """
         self.reset()
         self.check_columns(log.columns)
-        if self.compiled:
-            return self._run_compiled(log, None)
-        n = len(log)
-        inp = self._inputs(log)
-        valid = inp.valid()
-        idx = np.flatnonzero(valid)
-        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
-        result["vfs_valid"] = valid.astype(float)
-        if idx.size == 0:
-            return pd.DataFrame(result, index=log.index)
-        out = self._process(inp.take(idx))
-        # skipped samples hold the output of the last valid one
-        pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
-        has = pos >= 0
-        for k, v in out.items():
-            col = np.full(n, np.nan)
-            col[has] = np.asarray(v, float)[pos[has]]
-            result[k] = col
-        self._last = {k: float(result[k][idx[-1]]) for k in VFS_OUTPUT_COLUMNS}
-        self._last["vfs_valid"] = 1.0
-        return pd.DataFrame(result, index=log.index)
+        return self._run_compiled(log, None)
 
     def _run_compiled(self, log: pd.DataFrame, resync: np.ndarray | None) -> pd.DataFrame:
         """The compiled batch: the kernel's step looped over the log in one call."""
         from grfguard.kernels.vfs import log_to_array
 
-        X, has_gyro, has_ref = log_to_array(log)
+        X, has_gyro, has_ref = log_to_array(log, self._in_cols)
         k = self.kernel(has_gyro, has_ref)
         if resync is None:
             Y = k.run(X)
@@ -436,17 +257,25 @@ class VirtualForceSensor:
         return pd.DataFrame(Y, index=log.index, columns=list(VFS_OUTPUT_COLUMNS))
 
     def input_valid(self, log: pd.DataFrame) -> np.ndarray:
-        """(T,) bool: rows whose inputs the sensor can use (finite quaternion, joints...)."""
-        return self._inputs(log).valid()
+        """(T,) bool: rows whose inputs the sensor can use: joints, quaternion (non-zero),
+        and the gyro, planned contact, accelerometer and force sensors when read, finite
+        (the planned ZMP is optional)."""
+        from grfguard.kernels.vfs import log_to_array
+
+        X, has_gyro, has_ref = log_to_array(log, self._in_cols)
+        c = self.config
+        paper = c.com_method == "paper"
+        use = [*range(16), *(range(16, 19) if has_gyro else ()),
+               *(range(19, 22) if paper or c.use_accelerometer else ()),
+               *(range(22, 24) if has_ref else ()), *(range(24, 32) if paper else ())]
+        ok = np.isfinite(X[:, use]).all(axis=1)
+        return ok & (np.linalg.norm(np.nan_to_num(X[:, 12:16]), axis=1) >= 1e-6)
 
     def resync(self) -> None:
         """Forget the finite-difference history only (a continuity break): the next two
         samples have no rate; filters, attitude and odometry keep their state."""
         for k in self._kern.values():
             k.resync()
-        self._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
-        self._prev_frames = None
-        self._prev_L = None
 
     def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
         """:meth:`run` with :meth:`resync` before every row where ``resync`` is True (the
@@ -454,231 +283,9 @@ class VirtualForceSensor:
         """
         self.reset()
         self.check_columns(log.columns)
-        if self.compiled:
-            out = self._run_compiled(log, resync)
-            self.reset()
-            return out
-        n = len(log)
-        inp = self._inputs(log)
-        valid = inp.valid()
-        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
-        result["vfs_valid"] = valid.astype(float)
-        starts = sorted({0, *np.flatnonzero(resync).tolist(), n})
-        outs: dict[str, list[np.ndarray]] = {}
-        for a, b in zip(starts[:-1], starts[1:], strict=True):
-            idx = a + np.flatnonzero(valid[a:b])
-            if a > 0 and resync[a]:
-                self.resync()
-            if idx.size:
-                for k, val in self._process(inp.take(idx)).items():
-                    outs.setdefault(k, []).append(np.asarray(val, float))
-        if outs:
-            pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
-            has = pos >= 0
-            for k, parts in outs.items():
-                v = np.concatenate(parts)
-                col = np.full(n, np.nan)
-                col[has] = v[pos[has]]
-                result[k] = col
+        out = self._run_compiled(log, resync)
         self.reset()
-        return pd.DataFrame(result, index=log.index)
-
-    # ------------------------------------------------------------------ stages
-    def _process(self, inp: _Inputs) -> dict[str, np.ndarray]:
-        """All stages over T valid samples (T = 1 when streaming): (T,) output columns."""
-        quat = self._attitude(inp.quat, inp.gyro)
-        fr = self.kin.forward_batch(inp.q, quat)
-        st = inp.stance > 0.5 if inp.stance is not None else self._stance_fallback(fr.p_AK)
-        fr, p_WT, ground = self._odometry(fr, st)
-        com_W = p_WT + fr.p_AC
-        p_WK = p_WT[:, None, :] + fr.p_AK
-        if self.config.com_method == "multibody":
-            com_out = com_W
-            force, zmp = self._momentum(fr, p_WT, com_W, ground, quat, inp.acc)
-        else:
-            com_out, force, zmp = self._paper_momentum(p_WK, com_W, ground, quat, inp)
-        forces, feet = self._split(fr, p_WT, p_WK, com_out, ground, force, zmp, st)
-        return _outputs(forces, p_WK[:, :, :2], com_out, feet, zmp)
-
-    def _attitude(self, quat: np.ndarray, gyro: np.ndarray | None) -> np.ndarray:
-        """Filtered IMU attitude (T, 4) (stateful: one filter step per sample)."""
-        out = np.empty_like(quat)
-        for i in range(quat.shape[0]):
-            out[i] = self._att.update(quat[i], None if gyro is None else gyro[i])
         return out
-
-    def _odometry(
-        self, fr: KinematicFrames, st: np.ndarray
-    ) -> tuple[KinematicFrames, np.ndarray, np.ndarray]:
-        """Leg odometry: frames rotated by the anchor correction, trunk position (T, 3) [m]
-        and ground height (T,) [m] (stateful)."""
-        m = st.shape[0]
-        p_WT, ground, R_corr = np.empty((m, 3)), np.empty(m), np.empty((m, 3, 3))
-        for i in range(m):
-            R_corr[i], p_WT[i], ground[i], _ = self._odo.update(
-                fr.p_AK[i], fr.p_AS[i], fr.R_WS[i], st[i]
-            )
-        return rotate_frames(fr, R_corr), p_WT, ground
-
-    def _momentum(
-        self, fr: KinematicFrames, p_WT: np.ndarray, com_W: np.ndarray, ground: np.ndarray,
-        quat: np.ndarray, acc: np.ndarray | None,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Multibody momentum: total ground force (T, 3) [N] and ZMP (T, 2) [m]."""
-        raw = self._raw_rates(p_WT + fr.p_AI, fr.p_AC - fr.p_AI, fr)
-        acc_W = None
-        if self.config.use_accelerometer:
-            acc_W = np.einsum("tij,tj->ti", quat_to_matrix(quat), acc)
-            acc_W = acc_W - np.array([0.0, 0.0, self.g])
-        c_dd, ld = self._filter_rates(raw, acc_W)
-        force = self.mass * (c_dd + np.array([0.0, 0.0, self.g]))
-        return force, self._zmp(com_W, force, ld, ground)
-
-    def _raw_rates(self, p_WI: np.ndarray, p_IC: np.ndarray, fr: KinematicFrames) -> np.ndarray:
-        """Raw (unfiltered) rates (T, 9) = [d2 p_IC, L_dot, d2 p_WI] by finite differences.
-
-        The last two positions, the last frame and the last angular momentum carry over
-        between calls, so T samples at once and T calls with one sample give the same
-        numbers; the first two samples after a reset have no rate (zero).
-        """
-        dt, T = self.config.dt, p_WI.shape[0]
-        raw = np.zeros((T, 9))
-        for off, key, x in ((0, "C", p_IC), (6, "I", p_WI)):
-            h = self._hist[key].shape[0]
-            xs = np.concatenate([self._hist[key], x])
-            v = (xs[1:] - xs[:-1]) / dt
-            r0 = max(0, 2 - h)
-            raw[r0:, off : off + 3] = ((v[1:] - v[:-1]) / dt)[h + r0 - 2 :]
-            self._hist[key] = xs[-2:]
-        prev = self._prev_frames
-        hf = 0 if prev is None else 1
-        pB = fr.p_AB if prev is None else np.concatenate([prev.p_AB[-1:], fr.p_AB])
-        RB = fr.R_WB if prev is None else np.concatenate([prev.R_WB[-1:], fr.R_WB])
-        L_new = angular_momentum_about_com(
-            pB[1:], RB[1:], pB[:-1], RB[:-1], self.kin.body_mass, self.kin.body_inertia, dt
-        )
-        hl = 0 if self._prev_L is None else 1
-        Ls = L_new if self._prev_L is None else np.concatenate([self._prev_L, L_new])
-        raw[2 - hl - hf :, 3:6] = (Ls[1:] - Ls[:-1]) / dt
-        self._prev_frames = fr
-        self._prev_L = Ls[-1:] if Ls.shape[0] else None
-        return raw
-
-    def _filter_rates(
-        self, raw: np.ndarray, acc_W: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """CoM acceleration (T, 3) and angular momentum rate (T, 3) from raw rates (T, 9)."""
-        c = self.config
-        main = self._lp.run(raw)
-        if acc_W is not None:
-            c_dd = self._lp_acc.run(acc_W) + self._lp_fuse.run(raw[:, 6:9] - acc_W)
-            c_dd = c_dd + main[:, 0:3]
-            if not c.accelerometer_vertical:
-                c_dd[:, 2] = main[:, 2] + main[:, 8]
-        else:
-            c_dd = main[:, 0:3] + main[:, 6:9]
-        ld = main[:, 3:6] if c.use_angular_momentum else np.zeros_like(main[:, 3:6])
-        return c_dd, ld
-
-    def _zmp(
-        self, com_W: np.ndarray, force: np.ndarray, ld: np.ndarray, ground: np.ndarray
-    ) -> np.ndarray:
-        """ZMP (T, 2) from CoM, total force and angular momentum rate (T, 3) each."""
-        if self.config.zmp_filter == "direct":
-            return zmp_from_momentum(com_W, force, ld, ground)
-        h = np.maximum(com_W[:, 2] - ground, 1e-3)
-        fz = np.maximum(force[:, 2], 1.0)
-        w2 = fz / (self.mass * h)
-        u = np.stack([-ld[:, 1], ld[:, 0]], axis=1) / (self.mass * h)[:, None]
-        out = np.empty((com_W.shape[0], 2))
-        kf = self._zkf
-        for i in range(com_W.shape[0]):
-            out[i] = kf.update(com_W[i, :2], float(w2[i]), u[i])[0]
-        return out
-
-    def _paper_filter(self, com_z_rel: float) -> PaperCoMFilter:
-        c = self.config
-        if self._paper is None:
-            zc = c.lipm_height if c.lipm_height > 0 else com_z_rel
-            self._paper = PaperCoMFilter(
-                c.dt, zc, self.g, c.paper_process_noise, c.paper_measurement_noise,
-                dob_time_constant_s=c.paper_dob_time_constant,
-                dob_gain=c.paper_dob_gain,
-            )
-        return self._paper
-
-    def _paper_momentum(
-        self, p_WK: np.ndarray, com_W: np.ndarray, ground: np.ndarray, quat: np.ndarray,
-        inp: _Inputs,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The paper's LIPM filter: CoM (T, 3) [m], ground force (T, 3) [N], ZMP (T, 2) [m]."""
-        m = com_W.shape[0]
-        com_out, force, zmp = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2))
-        for i in range(m):
-            com_out[i], force[i], zmp[i] = self._paper_step(
-                p_WK[i], com_W[i], float(ground[i]), quat[i], inp.acc[i], inp.forces[i],
-                inp.zmp_ref[i],
-            )
-        return com_out, force, zmp
-
-    def _paper_step(
-        self, p_WK: np.ndarray, com_W: np.ndarray, ground: float, quat: np.ndarray,
-        acc: np.ndarray, forces: np.ndarray, zmp_ref: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        kf = self._paper_filter(float(com_W[2] - ground))
-        fsum = forces.sum()
-        if fsum > _MIN_FOOT_FORCE_N:
-            p_act = (forces[:, None] * p_WK[:, :2]).sum(axis=0) / fsum
-        elif self._p_act_prev is not None:
-            p_act = self._p_act_prev
-        else:
-            p_act = com_W[:2]
-        self._p_act_prev = p_act
-        acc_W = quat_to_matrix(quat) @ acc - np.array([0.0, 0.0, self.g])
-        ref = zmp_ref if np.all(np.isfinite(zmp_ref)) else None
-        c_hat, c_dd = kf.update(p_act, acc_W[:2], ref)
-        zc = kf.z_c
-        com_out = np.array([c_hat[0], c_hat[1], ground + zc])
-        force = self.mass * np.array([c_dd[0], c_dd[1], self.g])
-        zmp = c_hat - zc * c_dd / self.g
-        return com_out, force, zmp
-
-    def _split(
-        self, fr: KinematicFrames, p_WT: np.ndarray, p_WK: np.ndarray, com: np.ndarray,
-        ground: np.ndarray, force: np.ndarray, zmp: np.ndarray, st: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Corner forces (T, 8) [N] and feet in contact (T, 2)."""
-        c = self.config
-        if c.split_method == "paper":
-            return self._split_paper(fr.p_AS + p_WT[:, None, :], fr.R_WS, com, force, st), st
-        h = p_WK[:, :, 2] - ground[:, None]
-        contact = corner_contact(h, st, c.contact_height, c.kinematic_contact)
-        if self.contact_stiffness > 0:
-            forces = split_with_prior(
-                p_WK, contact, zmp, force[:, 2], c.qp_weight, self.contact_stiffness
-            )
-        else:
-            forces = split_qp(p_WK[:, :, :2], contact, zmp, force[:, 2], c.qp_weight)
-        return forces, contact.reshape(-1, 2, 4).any(axis=2)
-
-    def _split_paper(self, p_WS, R_WS, com, force, st) -> np.ndarray:
-        """Paper split for (T, ...) arrays."""
-        c = self.config
-        mid = p_WS.mean(axis=1)  # (T, 3)
-        x_axis = R_WS[:, :, :, 0].mean(axis=1)
-        heading = np.arctan2(x_axis[:, 1], x_axis[:, 0])
-        y_axis = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
-        cy_rel = ((com[:, :2] - mid[:, :2]) * y_axis).sum(axis=-1)
-        if c.paper_cy_max > 0:
-            cy_max: np.ndarray | float = c.paper_cy_max
-        else:
-            cy_max = 0.5 * np.abs(((p_WS[:, 1, :2] - p_WS[:, 0, :2]) * y_axis).sum(axis=-1))
-        alpha = paper_alpha(cy_rel, cy_max)
-        legs = paper_leg_forces(force, alpha, st)
-        f = p_WS - com[:, None, :]
-        cop_W = paper_cop_literal(f, legs)
-        cop_F = world_to_foot_xy(cop_W, R_WS)
-        return split_paper_feet(cop_F, legs[..., 2], self.points_F, c.qp_weight)
 
 
 def with_vfs_columns(log: pd.DataFrame, config: VFSConfig | None = None) -> pd.DataFrame:

@@ -1,4 +1,4 @@
-"""Compiled solver of the sole-compliance corner QP of :mod:`grfguard.estimate.compliance`.
+"""Compiled solver of the sole-compliance corner QP of the virtual force sensor.
 
 The pure-Python path solves, over the ``k`` corners in contact,
 
@@ -25,7 +25,7 @@ from grfguard.kernels._jit import njit_nort
 
 __all__ = ["RHO", "prior_qp", "MAX_CORNERS"]
 
-#: Weight of the sum row (same as ``grfguard.estimate.compliance._RHO``).
+#: Weight of the sum row (the math: ``tests/reference/corner_split.py``).
 RHO = 100.0
 #: Largest number of corners a call handles (scratch sizes).
 MAX_CORNERS = 16

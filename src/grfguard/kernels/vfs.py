@@ -38,15 +38,40 @@ import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
-from grfguard.io.schema import CONTACT_REF, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
+from grfguard.io.schema import (
+    CONTACT_REF,
+    FORCE_COLUMNS,
+    IMU_ACC,
+    IMU_GYRO,
+    IMU_QUAT,
+    JOINT_COLUMNS,
+    ZMP_REF,
+)
 from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
 from grfguard.kernels.nnls import prior_qp
+from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
+    N_XSTATE,
+    P_COM_PAPER,
+    P_KANC,
+    P_SPLIT_PAPER,
+    P_ZMP_KF,
+    anchor_init,
+    anchor_odometry,
+    extra_params,
+    paper_com,
+    paper_split,
+    valid_paper_inputs,
+    zmp_kalman,
+)
 
 __all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch"]
 
 #: Input row layout of :func:`vfs_step`.
 IN_COLUMNS: tuple[str, ...] = (*JOINT_COLUMNS, *IMU_QUAT, *IMU_GYRO, *IMU_ACC, *CONTACT_REF)
+#: Input row layout with the paper's CoM filter: :data:`IN_COLUMNS`, the force sensors
+#: ``force_r1..force_l4`` [N] and the planned ZMP ``zmp_ref_x/y`` [m] (NaN: not used).
+PAPER_IN_COLUMNS: tuple[str, ...] = (*IN_COLUMNS, *FORCE_COLUMNS, *ZMP_REF)
 _I_Q, _I_QUAT, _I_GYRO, _I_ACC, _I_REF = 0, 12, 16, 19, 22
 N_IN = 24
 N_OUT = 22
@@ -55,7 +80,7 @@ N_OUT = 22
 _P_DT, _P_KATT, _P_CH, _P_G, _P_MASS, _P_KC, _P_SW = 0, 1, 2, 3, 4, 5, 6
 _P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10, 11, 12
 _P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
-N_PRM = 18
+N_PRM = 40  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
 # int parameters (iprm)
 _IP_TRUNK, _IP_ROOT, _IP_JOINTS, _IP_IMU, _IP_CORNERS, _IP_SOLES = 0, 1, 2, 14, 15, 23
 N_IPRM = 25
@@ -70,6 +95,7 @@ _S_FIXED = 60
 
 
 def _state_size(nbr: int, order: int) -> int:
+    # then N_XSTATE floats of the non-default settings' stages (vfs_paper)
     return _S_FIXED + 15 * order + 12 * nbr
 
 
@@ -169,25 +195,45 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
                                       az, qpos, xpos, xquat, xmat, xipos, ximat, stc, msub,
                                       sxp, sxm, qin, pk, tail, view1d(iws, 32, 11))
     st0, st1 = _stance(x, prm, pk)
-    pwt0, pwt1, pwt2, ground = _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1)
+    xo = _S_FIXED + 15 * order + 12 * (nb - 1)  # state of the vfs_paper stages
+    if prm[P_KANC] > 0.0:  # vfs_paper: anchor attitude (rotates the frames)
+        if state[_S_ANCHOR] < 0:
+            _init_anchor(state, pk, sxp, st0, st1)
+            anchor_init(state, xo, _S_ANCHOR, sxm)
+        pwt0, pwt1, pwt2, ground, p_AC0, p_AC1, p_AC2 = anchor_odometry(
+            state, xo, prm, _S_ANCHOR, _S_PWA, pk, sxp, sxm, xipos, ximat, nb, p_AC0, p_AC1,
+            p_AC2, st0, st1)
+    else:
+        pwt0, pwt1, pwt2, ground = _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1)
     com0 = pwt0 + p_AC0
     com1 = pwt1 + p_AC1
     com2 = pwt2 + p_AC2
-    _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt)
-    _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
-                   order, dt)
-    F0, F1, F2, ld0, ld1 = _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a,
-                                    v3b, v3c, v3d, aw, ax, ay, az, order, g)
-    # ------------------------------------------------------------ ZMP (Newton-Euler)
-    h = com2 - ground
-    fz = max(F2, 1.0)
-    zmp0 = com0 - (h * F0 + ld1) / fz
-    zmp1 = com1 - (h * F1 - ld0) / fz
+    if prm[P_COM_PAPER] != 0.0:  # vfs_paper: the paper's LIPM CoM filter
+        com0, com1, com2, F0, F1, F2, zmp0, zmp1 = paper_com(
+            x, state, xo, prm, pk, pwt0, pwt1, pwt2, com0, com1, com2, ground, aw, ax, ay, az)
+    else:
+        _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt)
+        _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
+                       order, dt)
+        F0, F1, F2, ld0, ld1 = _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main,
+                                        v3a, v3b, v3c, v3d, aw, ax, ay, az, order, g)
+        # -------------------------------------------------------- ZMP (Newton-Euler)
+        h = com2 - ground
+        fz = max(F2, 1.0)
+        zmp0 = com0 - (h * F0 + ld1) / fz
+        zmp1 = com1 - (h * F1 - ld0) / fz
+        if prm[P_ZMP_KF] != 0.0:  # vfs_paper: pendulum Kalman filter ZMP
+            zmp0, zmp1 = zmp_kalman(state, xo, prm, com0, com1, com2, ground, F2, ld0, ld1)
     ctc = view1d(iws, 0, 8)
-    _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
-    _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
-                 qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8), tail,
-                 F2, zmp0, zmp1)
+    if prm[P_SPLIT_PAPER] != 0.0:  # vfs_paper: the paper's split
+        paper_split(prm, pk, sxp, sxm, pwt0, pwt1, pwt2, com0, com1, com2, F0, F1, F2, st0,
+                    st1, forces, ctc, qp_x, qp_z, view1d(iws, 8, 8), view1d(iws, 16, 8),
+                    qp_M, qp_rhs, qp_dots, tail)
+    else:
+        _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
+        _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
+                     qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8),
+                     tail, F2, zmp0, zmp1)
     _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
     return True
 
@@ -213,6 +259,8 @@ def _valid_sample(x, y, state, prm):
         for i in range(_I_REF, _I_REF + 2):
             if not math.isfinite(x[i]):
                 ok = False
+    if ok and prm[P_COM_PAPER] != 0.0:  # vfs_paper: acc and force sensors too
+        ok = valid_paper_inputs(x)
     if ok:
         qw, qx, qy, qz = x[12], x[13], x[14], x[15]
         if math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) < 1e-6:
@@ -898,7 +946,12 @@ class VFSKernel:
         prm[_P_HAS_REF] = float(has_ref)
         prm[_P_BODY_MASS_SUM] = float(kin.body_mass.sum())
         prm[_P_QIT : _P_QIT + 4] = kin._q_IT
+        prm[18:] = extra_params(cfg, vfs.points_F)
         self.prm = prm
+        #: Input row layout (:data:`IN_COLUMNS`; the paper's CoM filter also reads the
+        #: force sensors and the planned ZMP: :data:`PAPER_IN_COLUMNS`).
+        self.in_columns = PAPER_IN_COLUMNS if cfg.com_method == "paper" else IN_COLUMNS
+        self.n_in = len(self.in_columns)
         ip = np.zeros(N_IPRM, np.int64)
         ip[_IP_TRUNK] = kin.trunk_id
         ip[_IP_ROOT] = kin.root_qadr
@@ -923,7 +976,7 @@ class VFSKernel:
         self.filt_zi = np.ascontiguousarray(np.stack(zs))
         self.order = cfg.filter_order
         nb = tm.nbody
-        self.state = np.zeros(_state_size(nb - 1, self.order))
+        self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE)
         header = np.array([nb, tm.jnt_type.shape[0], tm.nq,
                            tm.site_body.shape[0], self.order], np.int64)
         self.cf = np.ascontiguousarray(np.concatenate([
@@ -944,17 +997,8 @@ class VFSKernel:
 
     @staticmethod
     def unsupported(cfg: VFSConfig) -> str:
-        """Empty when ``cfg`` is covered, else which setting is not."""
-        if cfg.com_method != "multibody":
-            return f"com_method={cfg.com_method!r}"
-        if cfg.split_method != "qp":
-            return f"split_method={cfg.split_method!r}"
-        if cfg.zmp_filter != "direct":
-            return f"zmp_filter={cfg.zmp_filter!r}"
-        if cfg.anchor_attitude_time_constant != 0.0:
-            return "anchor_attitude_time_constant > 0"
-        if cfg.contact_stiffness_per_kg <= 0.0:
-            return "contact_stiffness_per_kg = 0 (rigid corner QP)"
+        """Empty when ``cfg`` is covered, else which setting is not (every
+        :class:`VFSConfig` is)."""
         return ""
 
     @classmethod
@@ -984,10 +1028,10 @@ class VFSKernel:
         before each row index in ``starts``."""
         self.reset()
         X = np.ascontiguousarray(X, dtype=float)
-        if X.ndim != 2 or X.shape[1] != N_IN:
+        if X.ndim != 2 or X.shape[1] != self.n_in:
             raise LogFormatError(
-                f"the compiled virtual force sensor takes a (T, {N_IN}) array in IN_COLUMNS "
-                f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
+                f"the compiled virtual force sensor takes a (T, {self.n_in}) array in "
+                f"in_columns order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
             )
         n = X.shape[0]
         Y = np.empty((n, N_OUT))
@@ -1015,12 +1059,12 @@ class VFSKernel:
             ep(x, y, self.state, self.cf, self.ci, self.ws, self.iws)
             return y
         x = np.ascontiguousarray(x, dtype=float)
-        if x.shape != (N_IN,) or y.shape != (N_OUT,):
+        if x.shape != (self.n_in,) or y.shape != (N_OUT,):
             # the compiled code does not check bounds: refuse wrong shapes here
             raise LogFormatError(
-                f"the compiled virtual force sensor takes an input row of shape ({N_IN},) in "
-                f"IN_COLUMNS order and an output row of shape ({N_OUT},); got {x.shape} and "
-                f"{y.shape} (see grfguard.kernels.vfs.IN_COLUMNS / OUT_COLUMNS)"
+                f"the compiled virtual force sensor takes an input row of shape ({self.n_in},)"
+                f" in in_columns order and an output row of shape ({N_OUT},); got {x.shape} "
+                f"and {y.shape} (see grfguard.kernels.vfs.IN_COLUMNS / OUT_COLUMNS)"
             )
         args = (x, y, self.state, self.cf, self.ci, self.ws, self.iws)
         ep = self._entry
@@ -1042,10 +1086,10 @@ class VFSKernel:
         """Reset, then every row of ``X`` (T, 24) -> (T, 22)."""
         self.reset()
         X = np.ascontiguousarray(X, dtype=float)
-        if X.ndim != 2 or X.shape[1] != N_IN:
+        if X.ndim != 2 or X.shape[1] != self.n_in:
             raise LogFormatError(
-                f"the compiled virtual force sensor takes a (T, {N_IN}) array in IN_COLUMNS "
-                f"order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
+                f"the compiled virtual force sensor takes a (T, {self.n_in}) array in "
+                f"in_columns order; got shape {X.shape} (see grfguard.kernels.vfs.log_to_array)"
             )
         Y = np.empty((X.shape[0], N_OUT))
         vfs_run(X, Y, *self.packed_args())
@@ -1062,12 +1106,14 @@ def _out_columns() -> tuple[str, ...]:
 OUT_COLUMNS: tuple[str, ...] = _out_columns()
 
 
-def log_to_array(log: pd.DataFrame | Mapping[str, np.ndarray]) -> tuple[np.ndarray, bool, bool]:
-    """Input array (T, 24) from a log, and whether it has the gyro and the planned contact."""
+def log_to_array(log: pd.DataFrame | Mapping[str, np.ndarray],
+                 columns: tuple[str, ...] = IN_COLUMNS) -> tuple[np.ndarray, bool, bool]:
+    """Input array (T, 24) from a log (``columns``: another layout, e.g.
+    :data:`PAPER_IN_COLUMNS`), and whether it has the gyro and the planned contact."""
     cols = log.columns if isinstance(log, pd.DataFrame) else list(log)
     n = len(log) if isinstance(log, pd.DataFrame) else len(next(iter(log.values())))
-    X = np.full((n, N_IN), np.nan)
-    for i, c in enumerate(IN_COLUMNS):
+    X = np.full((n, len(columns)), np.nan)
+    for i, c in enumerate(columns):
         if c in cols:
             X[:, i] = np.asarray(log[c], dtype=float)
     has_gyro = all(c in cols for c in IMU_GYRO)

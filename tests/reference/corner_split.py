@@ -1,4 +1,9 @@
-r"""Contact-point forces with a sole-compliance prior.
+r"""Reference (tests and benchmarks only; formerly ``grfguard.estimate.compliance`` and
+``grfguard.kernels.split``): the corner QP of T samples around the package's compiled
+solver :func:`grfguard.kernels.nnls.prior_qp` (the one inside the compiled virtual force
+sensor), for the numpy stages of ``reference.vfs_stages`` and the QP tests.
+
+Contact-point forces with a sole-compliance prior.
 
 The total force and the ZMP fix only three combinations of the corner forces. In double
 support the other five (and the twist of a single foot) depend on internal forces between
@@ -40,7 +45,10 @@ import math
 
 import numpy as np
 
-__all__ = ["compliance_prior", "qp_split", "solve_with_prior", "split_with_prior"]
+from grfguard.kernels._jit import njit
+from grfguard.kernels.nnls import MAX_CORNERS, new_scratch, prior_qp
+
+__all__ = ["compliance_prior", "qp_loop", "qp_split", "solve_with_prior"]
 
 
 def compliance_prior(
@@ -77,10 +85,6 @@ def qp_split(
         (T, n) forces [N]: zero off ``allowed`` and for samples without load or allowed
         corner, NaN for a sample with a non-finite input on an allowed corner.
     """
-    # (imported here: grfguard.kernels imports this package's sensor)
-    from grfguard.kernels.nnls import MAX_CORNERS, new_scratch
-    from grfguard.kernels.split import qp_loop
-
     rel = np.ascontiguousarray(points_rel_m, dtype=float)
     T, n = rel.shape[0], rel.shape[1]
     if n > MAX_CORNERS:
@@ -108,23 +112,36 @@ def solve_with_prior(
                     np.asarray(contact, bool)[None])[0]
 
 
-def split_with_prior(
-    corners_W: np.ndarray,
-    contact: np.ndarray,
-    zmp_W: np.ndarray,
-    total_force_n: np.ndarray,
-    weight: float,
-    stiffness_n_m: float,
-) -> np.ndarray:
-    """Batch over T samples: corners (T, n, 3) in world [m], contact (T, n), ZMP (T, 2) [m],
-    total force (T,) [N]; returns (T, n) forces [N]."""
-    # vectorized prior (same arithmetic as compliance_prior)
-    z = corners_W[:, :, 2]
-    cnt = contact.sum(axis=1)
-    safe = np.maximum(cnt, 1)
-    zbar = np.where(contact, z, 0.0).sum(axis=1) / safe
-    prior = np.where(
-        contact, (total_force_n / safe)[:, None] + stiffness_n_m * (zbar[:, None] - z), 0.0
-    )
-    rel = corners_W[:, :, :2] - zmp_W[:, None, :]
-    return qp_split(rel, prior, total_force_n, weight, contact)
+@njit
+def qp_loop(rel, prior, total, allowed, sw, out, x, z, free, isfree, M, rhs, dots, idx,
+             relc, pc):
+    """:func:`prior_qp` + rescale for every sample (``out`` (T, n) written)."""
+    for t in range(total.shape[0]):
+        m = 0
+        fin = math.isfinite(total[t])
+        for j in range(allowed.shape[1]):
+            out[t, j] = 0.0
+            if allowed[t, j]:
+                if not (math.isfinite(rel[t, j, 0]) and math.isfinite(rel[t, j, 1])
+                        and math.isfinite(prior[t, j])):
+                    fin = False
+                relc[m, 0] = rel[t, j, 0]
+                relc[m, 1] = rel[t, j, 1]
+                pc[m] = prior[t, j]
+                idx[m] = j
+                m += 1
+        if not fin:
+            out[t, :] = np.nan
+            continue
+        if m == 0 or total[t] <= 0.0:
+            continue
+        prior_qp(relc[:m], pc[:m], total[t], sw, m, x, z, free, isfree, M, rhs, dots)
+        if m == 8:  # numpy's pairwise order, as the compiled sensor
+            s = ((x[0] + x[1]) + (x[2] + x[3])) + ((x[4] + x[5]) + (x[6] + x[7]))
+        else:
+            s = x[0]
+            for c in range(1, m):
+                s += x[c]
+        f = total[t] / s if s > 0 else 1.0
+        for c in range(m):
+            out[t, idx[c]] = x[c] * f if s > 0 else x[c]

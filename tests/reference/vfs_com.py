@@ -1,4 +1,7 @@
-"""CoM and momentum estimators of the virtual force sensor.
+"""Reference (tests and benchmarks only; formerly ``grfguard.estimate.com``): CoM and
+momentum estimators of the virtual force sensor in numpy, compiled in
+:mod:`grfguard.kernels.vfs` (multibody, leg odometry) and :mod:`grfguard.kernels.vfs_paper`
+(the paper's LIPM filter, the pendulum Kalman ZMP, the anchor attitude).
 
 Two estimators, both producing the same quantities per sample: CoM ``c`` in world [m],
 CoM acceleration ``c_dd`` [m/s^2], centroidal angular momentum rate ``L_dot`` [N m],

@@ -1,4 +1,7 @@
-r"""Leg force split, centre of pressure and contact-point forces.
+r"""Reference (tests and benchmarks only; formerly ``grfguard.estimate.legs``): leg force
+split, centre of pressure and contact-point forces in numpy, compiled in
+:func:`grfguard.kernels.vfs._corner_contact` / ``_force_split`` and
+:func:`grfguard.kernels.vfs_paper.paper_split`.
 
 Two methods, both on arrays over time (leading axis ``T``) and usable on one sample:
 
@@ -31,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grfguard.estimate.compliance import qp_split
+from reference.corner_split import qp_split
 
 __all__ = [
     "corner_contact",
@@ -41,6 +44,7 @@ __all__ = [
     "paper_cop_literal",
     "world_to_foot_xy",
     "split_paper_feet",
+    "split_with_prior",
 ]
 
 
@@ -190,3 +194,25 @@ def split_paper_feet(
     rel = points_F[None, :, :] - cop[:, None, :]
     forces = qp_split(rel, np.repeat(fz[:, None] / n, n, axis=1), fz, weight)
     return forces.reshape(-1, 8)
+
+
+def split_with_prior(
+    corners_W: np.ndarray,
+    contact: np.ndarray,
+    zmp_W: np.ndarray,
+    total_force_n: np.ndarray,
+    weight: float,
+    stiffness_n_m: float,
+) -> np.ndarray:
+    """Batch over T samples: corners (T, n, 3) in world [m], contact (T, n), ZMP (T, 2) [m],
+    total force (T,) [N]; returns (T, n) forces [N]."""
+    # vectorized prior (same arithmetic as compliance_prior)
+    z = corners_W[:, :, 2]
+    cnt = contact.sum(axis=1)
+    safe = np.maximum(cnt, 1)
+    zbar = np.where(contact, z, 0.0).sum(axis=1) / safe
+    prior = np.where(
+        contact, (total_force_n / safe)[:, None] + stiffness_n_m * (zbar[:, None] - z), 0.0
+    )
+    rel = corners_W[:, :, :2] - zmp_W[:, None, :]
+    return qp_split(rel, prior, total_force_n, weight, contact)
