@@ -172,10 +172,10 @@ def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: 
 
 
 def test_uncompiled_features_fall_back(walk: pd.DataFrame) -> None:
-    """The paper method, the common-mode layer and diagnostics run the Python stages;
-    ``update_array`` still works through them."""
+    """The paper method and diagnostics run the Python stages (the common-mode layer is
+    compiled: tests/test_kernels_system.py); ``update_array`` still works through them."""
+    assert not Monitor.for_log(walk, common_mode=True).compiled_reason()
     for mon in (Monitor.for_log(walk, MonitorConfig(method="paper")),
-                Monitor.for_log(walk, common_mode=True),
                 Monitor.for_log(walk, MonitorConfig(diagnostics=True))):
         assert mon.compiled_reason()
         y = mon.update_array(np.full(len(mon.input_columns), np.nan))

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from grfguard.detect.system import GyroBiasLearner, SwingZeroLearner
-from grfguard.model.robot import SENSOR_NAMES
+from grfguard.model.robot import SENSOR_NAMES, SURALP
 from grfguard.pipeline import Monitor
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
 from grfguard.sim.reality import load_reality
@@ -65,7 +65,7 @@ def test_learners_ignore_motion_and_faults() -> None:
     for _ in range(2000):  # still, below the deadband
         b = g.update([0.005, 0.0, 0.0], [1.0, 1.0], [0.0, 0.0])
     assert b == (0.0, 0.0, 0.0)
-    z = SwingZeroLearner(dt_s=0.001)
+    z = SwingZeroLearner(SURALP, dt_s=0.001)
     for _ in range(2000):  # a 100 N offset in swing is a fault, not a zero
         zs = z.update([100.0, 8.0, 0.0, 0.0, 0, 0, 0, 0], [0.0, 500.0], [False, True],
                       [False] * 8)

@@ -11,7 +11,7 @@ import pytest
 
 from grfguard.detect.system import AccVibrationDetector, CommonModeMonitor, SwingZeroLearner
 from grfguard.faults import inject_faults, parse_fault_spec
-from grfguard.model.robot import SENSOR_NAMES
+from grfguard.model.robot import SENSOR_NAMES, SURALP
 from grfguard.pipeline import Monitor
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
 from grfguard.sim.reality import load_reality
@@ -30,12 +30,12 @@ def test_trunk_com_y_error_is_blamed_on_the_model() -> None:
 
 
 def test_arming_state_of_the_learners() -> None:
-    z = SwingZeroLearner(dt_s=0.001)
+    z = SwingZeroLearner(SURALP, dt_s=0.001)
     assert not z.armed(0) and not z.armed(1)
     for _ in range(450):  # 0.45 s of swing of the right foot: 0.1 s settle + 0.35 s
         z.update([5.0] * 4 + [300.0] * 4, [0.0, 1100.0], [False, True], [False] * 8)
     assert z.armed(0) and not z.armed(1)
-    cm = CommonModeMonitor(dt_s=0.001)
+    cm = CommonModeMonitor(SURALP, dt_s=0.001)
     v = np.array([300.0, 300.0, 250.0, 250.0, 0.0, 0.0, 0.0, 0.0])
     ds = np.array([150.0, 150.0, 125.0, 125.0] * 2)
     for _ in range(3000):  # double support is not used by the fit

@@ -252,7 +252,7 @@ def run(
         df.attrs.setdefault("robot_name", robot)
         df.attrs.setdefault("sensing", rob.sensing)
     else:
-        df = read_any(log, topics_map, time_order=time_order)
+        df = read_any(log, topics_map, time_order=time_order, copy=False)  # read-only columns
     robot_for_log(df, rob, str(log))
     if unit_check:
         check_log_plausible(df, rob, str(log))

@@ -49,6 +49,7 @@ from grfguard.detect.system import (
     ImuTiltLearner,
     SwingZeroLearner,
     hold_unarmed_tests,
+    quiet_vfs_config,
     swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
@@ -125,6 +126,13 @@ def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
     order = list(log.columns) + [c for c in new if c not in log.columns]
     keep = log.drop(columns=[c for c in new if c in log.columns])
     return pd.concat([keep, add], axis=1)[order]
+
+
+def _kernel_supports(cfg: Any) -> bool:
+    """The compiled virtual sensor covers ``cfg``."""
+    from grfguard.kernels.vfs import VFSKernel
+
+    return VFSKernel.supports(cfg)
 
 
 def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
@@ -318,8 +326,10 @@ class Monitor:
             return "compiled=False"
         if self.config.method != "default":
             return f"method {self.config.method!r}"
-        if self.common is not None:
-            return "the common-mode layer"
+        if self.vfs_quiet is not None and not (
+                getattr(self.vfs, "compiled", False) and hasattr(self.vfs_quiet, "kernel")
+                and _kernel_supports(self.vfs_quiet.config)):
+            return "the vibration twin's virtual force sensor settings"
         if self.config.diagnostics:
             return "diagnostics"
         if self.vfs is None:
@@ -349,7 +359,12 @@ class Monitor:
                 prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
                                     self.guard, (self.inputs.force_lo, self.inputs.force_hi))
                 vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
-                k = MonitorKernel(prm, self.inputs, vk, self.standing)
+                system = None
+                if self.common is not None:  # the system layer (kernels/system.py)
+                    qk = (self.vfs_quiet.kernel(has_gyro, has_ref)
+                          if self.vfs_quiet is not None else None)
+                    system = (self, has_gyro, qk)
+                k = MonitorKernel(prm, self.inputs, vk, self.standing, system)
             except Exception as exc:  # noqa: BLE001 - the compiled monitor is only faster
                 warnings.warn(f"compiled monitor unavailable ({exc}); using the pure-Python "
                               "stages", RuntimeWarning, stacklevel=3)
@@ -404,8 +419,7 @@ class Monitor:
         if vfs is None or not getattr(cfg, "use_accelerometer", False):
             return
         self.vibration = AccVibrationDetector(self.config.dt_s)
-        self.vfs_quiet = type(vfs)(vfs.robot, dataclasses.replace(cfg, use_accelerometer=False),
-                                   vfs.kin)
+        self.vfs_quiet = type(vfs)(vfs.robot, quiet_vfs_config(cfg), vfs.kin)
         th = self.config.thresholds
         self._quiet_config = self.config.with_thresholds(dataclasses.replace(
             th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))
@@ -630,7 +644,7 @@ class Monitor:
         ``contact_est_*``, ``vfs_valid`` (:mod:`grfguard.kernels.monitor`)."""
         from grfguard.kernels.monitor import input_columns
 
-        return input_columns(self.vfs is not None)
+        return input_columns(self.vfs is not None, self.common is not None)
 
     @property
     def output_columns(self) -> tuple[str, ...]:
@@ -641,7 +655,7 @@ class Monitor:
         :data:`grfguard.guard.SYSTEM_STATES`)."""
         from grfguard.kernels.monitor import output_columns
 
-        return output_columns(self.vfs is not None)
+        return output_columns(self.vfs is not None, self.common is not None)
 
     def update_array(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """One sample as arrays (the fast streaming call): ``x`` in

@@ -35,7 +35,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.signal import butter, lfilter, lfilter_zi
 
 __all__ = [
     "CausalLowPass",
@@ -64,7 +63,9 @@ class CausalLowPass:
     """
 
     def __init__(self, cutoff_hz: float, dt_s: float, order: int, n_channels: int) -> None:
-        b, a = butter(order, cutoff_hz, btype="low", fs=1.0 / dt_s)
+        from grfguard._iir import butter_lowpass, lfilter_zi  # scipy's, without scipy.signal
+
+        b, a = butter_lowpass(order, cutoff_hz, 1.0 / dt_s)
         self.b, self.a = np.asarray(b, float), np.asarray(a, float)
         self.n_channels = n_channels
         self._zi = lfilter_zi(self.b, self.a)
@@ -79,6 +80,8 @@ class CausalLowPass:
         x = np.asarray(x, float)
         if self._z is None:
             self._z = self._zi[:, None] * x[None, :]
+        from scipy.signal import lfilter
+
         y, self._z = lfilter(self.b, self.a, x[None, :], axis=0, zi=self._z)
         return y[0]
 
@@ -89,6 +92,8 @@ class CausalLowPass:
             return x.copy()
         if self._z is None:
             self._z = self._zi[:, None] * x[0][None, :]
+        from scipy.signal import lfilter
+
         y, self._z = lfilter(self.b, self.a, x, axis=0, zi=self._z)
         return y
 

@@ -118,7 +118,8 @@ class ModelCorrections:
             calibration data [m/s^2] (impact vibration; white noise alone is ~0.05).
         use_accelerometer: Whether the virtual sensor should fuse the accelerometer
             (False when it vibrates above ``ACC_QUIET_RMS``: its shaking would reach the
-            per-corner forces; leg odometry alone is then the better estimate).
+            per-corner forces; leg odometry alone, low-passed at 10 Hz, is then the better
+            estimate, see :func:`grfguard.detect.system.quiet_vfs_config`).
         encoder_offset_deg: Offset of each joint encoder (joint name -> [deg]; the
             reading minus the true angle). Individually they are poorly determined; what
             the fit fixes is their effect on each sole's tilt, which is what the virtual
@@ -721,11 +722,13 @@ def apply_corrections(log: pd.DataFrame, corr: ModelCorrections | None) -> pd.Da
 
 def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     """``config`` (a :class:`~grfguard.detect.MonitorConfig`, None for the default) with
-    the virtual sensor settings the corrections call for: the accelerometer left out of
-    the multibody estimator's fusion when it vibrated in the calibration data
-    (``corr.use_accelerometer``).
+    the virtual sensor settings the corrections call for: when the accelerometer vibrated
+    in the calibration data (``corr.use_accelerometer`` False), the monitor's quiet twin
+    (:func:`grfguard.detect.system.quiet_vfs_config`: no accelerometer, rate low-pass at
+    10 Hz) from the start.
     Unchanged when ``corr`` is None or the accelerometer was quiet."""
     from grfguard.detect import MonitorConfig
+    from grfguard.detect.system import quiet_vfs_config
     from grfguard.estimate.vfs import VFSConfig
 
     cfg = config if config is not None else MonitorConfig()
@@ -734,4 +737,4 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     vfs = cfg.vfs if cfg.vfs is not None else VFSConfig()
     if vfs.com_method != "multibody":  # the paper's LIPM filter: nothing to switch
         return cfg
-    return cfg.replace(vfs=dataclasses.replace(vfs, use_accelerometer=False))
+    return cfg.replace(vfs=quiet_vfs_config(vfs))

@@ -416,9 +416,11 @@ class ChannelMonitor:
               vs: list[float]) -> list[tuple[bool, str, float, float, float]]:
         self._t_prev = t
         ok = self.gate.step(t, cr, cl)
-        dt = self.dt_s if self.dt_s else 1e-3
-        n_const = max(3, int(round(self.config.const_s / dt)))
-        n_clear = int(round(self.config.clear_s / dt))
+        if self.dt_s:
+            n_const: float = max(3, int(round(self.config.const_s / self.dt_s)))
+            n_clear: float = int(round(self.config.clear_s / self.dt_s))
+        else:  # the first sample: no rate yet, so no frozen test and no clearing
+            n_const = n_clear = math.inf
         out = []
         assert self.channels is not None
         for c, x, v in zip(self.channels, xs, vs, strict=True):
@@ -430,7 +432,7 @@ class ChannelMonitor:
         return out
 
     def _channel_step(self, st: _Channel, c: str, t: float, x: float, v: float, ok: bool,
-                      loaded: bool, n_const: int, n_clear: int,
+                      loaded: bool, n_const: float, n_clear: float,
                       ) -> tuple[bool, str, float, float, float]:
         cfg = self.config
         if math.isfinite(x) and x == st.last_x:
@@ -498,7 +500,8 @@ class ChannelMonitor:
         return True, kind, fault, x - fault, st.onset_s
 
 
-#: Longest fault-free CUSUM excursion kept as onset evidence [samples].
+#: Longest fault-free CUSUM excursion kept as onset evidence [samples] (a memory bound:
+#: 200 s at 1 kHz, 2000 s at 100 Hz; half is dropped when it is reached).
 _MAX_EXCURSION = 200_000
 
 

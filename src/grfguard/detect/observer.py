@@ -30,8 +30,6 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import scipy.linalg
-from scipy.signal import lfilter
 
 from grfguard.errors import ConfigError
 
@@ -144,6 +142,8 @@ def steady_state_gain(config: ObserverConfig | None = None) -> ObserverGain:
     """
     config = config or ObserverConfig()
     a, c, q, r = observer_matrices(config)
+    import scipy.linalg  # lazy: scipy costs ~1 s of `grfguard run` start-up
+
     p = scipy.linalg.solve_discrete_are(a.T, c.T, q, r)
     s = float((c @ p @ c.T)[0, 0] + config.r)
     k = (p @ c.T)[:, 0] / s
@@ -188,6 +188,8 @@ def lowpass(x: np.ndarray, config: ObserverConfig, y0: np.ndarray | float = 0.0)
         config: Gives ``lowpass_hz`` and ``dt_s``.
         y0: Output before the first sample.
     """
+    from scipy.signal import lfilter  # lazy: see steady_state_gain
+
     a = math.exp(-2.0 * math.pi * config.lowpass_hz * config.dt_s)
     x = np.asarray(x, dtype=float)
     zi = a * np.broadcast_to(np.asarray(y0, dtype=float), x.shape[1:])[None, ...]
@@ -241,6 +243,8 @@ def run_observer(
         raise ConfigError(f"run_observer: eta0_n has shape {eta0.shape}, expected ({n},)")
     prev = eta0.copy()
     if not full and valid.all():
+        from scipy.signal import lfilter  # lazy: see steady_state_gain
+
         k = -gains[0, 0]
         eta, _ = lfilter([k], [1.0, -(1.0 - k)], e, axis=0, zi=((1.0 - k) * prev)[None, :])
     else:

@@ -26,6 +26,9 @@ import pandas as pd
 from grfguard.errors import LogFormatError
 from grfguard.model.description import SIDES
 
+#: Standard gravity [m/s^2].
+_G = 9.81
+
 __all__ = [
     "described_robot",
     "calibration_frames",
@@ -109,7 +112,7 @@ def is_described(df: pd.DataFrame) -> bool:
 
 
 def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
-                  channels: Any = None) -> pd.DataFrame:
+                  channels: Any = None, track: bool = True) -> pd.DataFrame:
     """The monitor over a log of a described robot.
 
     Ankle F/T sensors: :class:`~grfguard.detect.channels.ChannelMonitor` with
@@ -121,7 +124,10 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
     Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
     then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path, with the
     robot's shipped thresholds (:func:`described_thresholds`) when ``config`` carries
-    the default ones (SURALP's).
+    the default ones (SURALP's); then, unless ``track`` is False, the recovered force
+    of a cell flagged offset, drift or gain is tracked against the cell noise
+    (``sigma_swing_n`` of the thresholds) by :func:`grfguard.recover.track
+    .track_recovered`, a better estimate of the true force than ``reading - offset``.
 
     Args:
         df: The log.
@@ -129,6 +135,7 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
             when None).
         robot: As in :func:`described_robot`.
         channels: F/T robots only: the channel thresholds (default: the shipped ones).
+        track: Corner cells only: track the recovered forces (default True).
 
     Raises:
         LogFormatError: The robot's sensing is not supported by the monitor.
@@ -148,10 +155,17 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
         cfg = cfg.with_thresholds(own)
     sensing = df.attrs.get("sensing")
     if sensing == "corners":
+        rob = described_robot(df, robot)
         need = [vfs_col(s) for s in SENSOR_NAMES] + list(VFS_TOTAL_COLUMNS)
         if not all(c in df.columns for c in need):
-            df = with_described_vfs(df, robot)
-        return Monitor.for_log(df, cfg).run(df)
+            df = with_described_vfs(df, rob)
+        out = Monitor.for_log(df, cfg).run(df)
+        if not track:
+            return out
+        from grfguard.recover.track import track_recovered
+
+        return track_recovered(out, weight_n=rob.mass * _G, sensors=SENSOR_NAMES,
+                               noise_n=cfg.thresholds.sigma_swing_n)
     if sensing == "ft":
         from grfguard.detect.channels import ChannelConfig, ChannelMonitor
 

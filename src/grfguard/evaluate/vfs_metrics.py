@@ -123,7 +123,8 @@ def evaluate_vfs(
             "simulated log (with true_force_* truth) first"
         )
     t = out_df[TIME].to_numpy(float)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1e-3
+    # one sample has no rate (and no contact change to keep away from)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else float("inf")
     true = out_df[[true_force_col(s) for s in sensors]].to_numpy(float)
     est = out_df[[vfs_col(s) for s in sensors]].to_numpy(float)
     win = support_windows(true, dt, loaded_threshold_n, ss_margin_s, ds_margin_s)

@@ -13,11 +13,13 @@ __all__ = ["read_any"]
 
 
 def read_any(
-    path: str | Path, topics_map: str | Path | None = None, time_order: str = "strict"
+    path: str | Path, topics_map: str | Path | None = None, time_order: str = "strict",
+    copy: bool = True,
 ) -> pd.DataFrame:
     """The log in ``path``: a ROS bag (rosbag2 directory, ``.mcap``, ``.db3``, ROS 1
     ``.bag``) imported with ``topics_map`` (default: the example map), else a Parquet/CSV
-    log read with :func:`grfguard.io.logio.load_log` (``time_order`` as there).
+    log read with :func:`grfguard.io.logio.load_log` (``time_order`` and ``copy`` as
+    there).
 
     Raises:
         ConfigError: A topics map was given for a file that is not a bag.
@@ -45,4 +47,4 @@ def read_any(
         )
     from grfguard.io.logio import load_log
 
-    return load_log(p, time_order=time_order)
+    return load_log(p, time_order=time_order, copy=copy)

@@ -41,7 +41,8 @@ import numpy as np
 import pandas as pd
 
 from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
-from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME
+from grfguard.io.codes import codes_to_str, strings_to_str
+from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME, ZMP_REF
 from grfguard.kernels._jit import njit
 from grfguard.kernels.detect import (
     FLAG,
@@ -68,6 +69,16 @@ from grfguard.kernels.detect import (
     time_guard_step,
 )
 from grfguard.kernels.standing import N_SD, standing_params, standing_reset, standing_step
+from grfguard.kernels.system import (
+    N_SYSS,
+    reason_text,
+    sys_output,
+    sys_pre_detect,
+    sys_pre_vfs,
+    sys_twin,
+    system_reset,
+)
+from grfguard.kernels.system import OUT_COLUMNS as SYS_COLUMNS
 from grfguard.kernels.vfs import (
     _S_HN,
     _S_PREVF,
@@ -104,18 +115,21 @@ _M_MODE, _M_REJECT, _M_QTOL, _M_QIDX = 0, 1, 2, 3
 N_EX = 4
 
 
-def input_columns(with_vfs: bool) -> tuple[str, ...]:
-    """Input row layout of :func:`monitor_step` (with the virtual sensor inside or not)."""
+def input_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]:
+    """Input row layout of :func:`monitor_step` (with the virtual sensor inside or not;
+    with the system layer: ``zmp_ref_x/y`` appended)."""
+    extra = ZMP_REF if with_system else ()
     if with_vfs:
-        return (TIME, *FORCE_COLUMNS, *IN_COLUMNS)
-    return (TIME, *FORCE_COLUMNS, *PRE_VFS_COLUMNS, *ESTIMATOR_INPUTS)
+        return (TIME, *FORCE_COLUMNS, *IN_COLUMNS, *extra)
+    return (TIME, *FORCE_COLUMNS, *PRE_VFS_COLUMNS, *ESTIMATOR_INPUTS, *extra)
 
 
-def output_columns(with_vfs: bool) -> tuple[str, ...]:
-    """Output row layout of :func:`monitor_step`."""
+def output_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]:
+    """Output row layout of :func:`monitor_step` (with the system layer:
+    :data:`grfguard.kernels.system.OUT_COLUMNS` appended)."""
     det = (*(f"flag_{s}" for s in SENSOR_NAMES), *(f"kind_{s}" for s in SENSOR_NAMES),
            *(f"eta_{s}" for s in SENSOR_NAMES), *(f"recovered_{s}" for s in SENSOR_NAMES),
-           "system_state")
+           "system_state", *(SYS_COLUMNS if with_system else ()))
     return (*OUT_COLUMNS, *det) if with_vfs else det
 
 
@@ -235,7 +249,7 @@ def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
 
 @njit
 def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
-                 xc, vy, ws):
+                 xc, vy, ws, sy):
     """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
 
     ``ex`` receives ``(rejected, jump [s], valid, bounded)`` of the sample (what the
@@ -245,10 +259,16 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     ``ss``/``gs``/``prm``: detector state and parameters; ``sd``/``sp``: the standing
     layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``: off); ``vstate``/``cf``/``ci``/
     ``vws``/``viws``: the virtual sensor's (:class:`~grfguard.kernels.vfs.VFSKernel`);
-    ``xc`` (n_in,), ``vy`` (22,), ``ws`` (:data:`N_WS`): scratch.
+    ``xc`` (n_in,), ``vy`` (22,), ``ws`` (:data:`N_WS`): scratch. ``sy``: the system
+    layer's ``(sysp, syss, qstate, qcf, qci, qws, qiws, qy)``
+    (:mod:`grfguard.kernels.system`; ``sysp[0] = 0``: off).
     """
     mode = mp[_M_MODE]
     rejected = _input_guard(xin, xc, mp, lims)
+    sysp, syss, qstate, qcf, qci, qws, qiws, qy = sy  # ---- system layer (kernels/system.py)
+    son = sysp[0] != 0.0
+    if son:
+        sys_pre_vfs(sysp, syss, xc, cf, ci, vws, viws)
     clock, st, jump = time_guard_step(gs, xin[0], prm[P_DT], prm[P_GAPLIM])
     # Continuity.before
     reset = gs[G_STARTED] != 0.0 and (st == ST_GAP or gs[G_PREV_INVALID] != 0.0)
@@ -258,7 +278,12 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     cest = ws[_W_CEST:_W_CEST + 2]
     cref = ws[_W_CREF:_W_CREF + 2]
     valid = _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy)
+    if son:
+        valid = sys_twin(sysp, syss, prm, xc, reset, valid, vy, qy, qstate, qcf, qci, qws,
+                         qiws, v, tot, cest, _O_TOT, _O_CEST, _O_VALID)
     bounded, state = _prepare(gs, prm, clock, st, reset, valid, v, tot, cest)
+    if son:
+        sys_pre_detect(sysp, syss, ss, gs, xc[1:9], v, tot, cref, cest)
     rec = ws[_W_REC:_W_REC + 8]
     eta = ws[_W_ETA:_W_ETA + 8]
     detect_step(ss, gs, prm, clock, xc[1:9], v, tot, cref, cest, st == ST_GAP, rec, eta, ws)
@@ -276,6 +301,8 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
         o = _NV
     _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec)
     yout[o + 32] = state
+    if son:
+        sys_output(sysp, syss, yout, o + 33)
     ex[0] = 1.0 if rejected else 0.0
     ex[1] = jump
     ex[2] = 1.0 if valid else 0.0
@@ -284,11 +311,11 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
 
 @njit
 def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
-                ws):
+                ws, sy):
     """:func:`monitor_step` over every row of ``X`` into ``Y`` and ``EX`` (the batch path)."""
     for k in range(X.shape[0]):
         monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
-                     viws, xc, vy, ws)
+                     viws, xc, vy, ws, sy)
 
 
 class MonitorKernel:
@@ -301,13 +328,16 @@ class MonitorKernel:
     """
 
     def __init__(self, prm: np.ndarray, inputs: Any, vfs_kernel: VFSKernel | None,
-                 standing: Any = None) -> None:
+                 standing: Any = None, system: Any = None) -> None:
         self.with_vfs = vfs_kernel is not None
         self.sp = standing_params(standing, float(prm[P_DT]))
         self.sd = np.zeros(N_SD)
         standing_reset(self.sd)
-        self.in_cols = input_columns(self.with_vfs)
-        self.out_cols = output_columns(self.with_vfs)
+        # system layer (kernels/system.py): (monitor, has_gyro, twin VFS kernel or None)
+        self.with_system = system is not None
+        self.in_cols = input_columns(self.with_vfs, self.with_system)
+        self.out_cols = output_columns(self.with_vfs, self.with_system)
+        self._system_arrays(system)
         self.prm = np.ascontiguousarray(prm, dtype=float)
         self.ss, self.gs = new_state()
         n_in = len(self.in_cols)
@@ -341,16 +371,40 @@ class MonitorKernel:
         self.sin = (n_in,)
         self.sout = (len(self.out_cols),)
         self._pack()
+        system_reset(self.sysp, self.syss, self.prm, self.qstate)
+
+    def _system_arrays(self, system: Any) -> None:
+        """The system layer's parameters, state and twin virtual sensor (placeholders when
+        the layer is off)."""
+        from grfguard.kernels.system import system_params
+
+        self.quiet_kernel = None
+        self.vib_config = None
+        self.sysp, self.syss = np.zeros(1), np.zeros(N_SYSS)
+        if system is not None:
+            mon, has_gyro, qk = system
+            self.sysp = system_params(mon, self.in_cols, has_gyro)
+            self.quiet_kernel = qk
+            self.vib_config = mon.vibration.config if mon.vibration is not None else None
+        qk = self.quiet_kernel
+        if qk is None:
+            self.qstate, self.qcf, self.qws = np.zeros(1), np.zeros(1), np.zeros(1)
+            self.qci, self.qiws = np.zeros(1, np.int64), np.zeros(1, np.int64)
+        else:
+            self.qstate, self.qcf, self.qws, self.qci, self.qiws = (
+                qk.state, qk.cf, qk.ws, qk.ci, qk.iws)
+        self.qy = np.zeros(_NV)
 
     # Every array of the step lives in two buffers (floats F, ints I) so that a call from
     # Python converts four arguments, not eighteen (about 2 us less per sample).
     _F_PARTS = ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "vstate", "cf", "vws",
-                "xc", "vy", "ws")
+                "xc", "vy", "ws", "sysp", "syss", "qstate", "qcf", "qws", "qy")
 
     def _parts(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         vstate, cf, ci, vws, viws = self.vfs_args()
         named = {"vstate": vstate, "cf": cf, "vws": vws}
-        return [named[n] if n in named else getattr(self, n) for n in self._F_PARTS], [ci, viws]
+        return ([named[n] if n in named else getattr(self, n) for n in self._F_PARTS],
+                [ci, viws, self.qci, self.qiws])
 
     def _pack(self) -> None:
         fparts, iparts = self._parts()
@@ -377,11 +431,19 @@ class MonitorKernel:
             views[n] = self.F[h[2 * j]:h[2 * j] + h[2 * j + 1]]
         views["lims"] = views["lims"].reshape(2, len(self.in_cols))
         views["ss"] = views["ss"].reshape(self.ss.shape)
-        for n in ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "xc", "vy", "ws"):
+        for n in ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "xc", "vy", "ws", "sysp",
+                  "syss", "qstate", "qcf", "qws", "qy"):
             setattr(self, n, views[n])
         k = 2 * len(self._F_PARTS) + 1
         ci = self.I[h[k]:h[k] + h[k + 1]]
         viws = self.I[h[k + 2]:h[k + 2] + h[k + 3]]
+        self.qci = self.I[h[k + 4]:h[k + 4] + h[k + 5]]
+        self.qiws = self.I[h[k + 6]:h[k + 6] + h[k + 7]]
+        qk = getattr(self, "quiet_kernel", None)
+        if qk is not None:
+            qk.state, qk.cf, qk.ws, qk.ci, qk.iws = (self.qstate, self.qcf, self.qws,
+                                                     self.qci, self.qiws)
+            qk._entry = None
         vk = self.vfs_kernel
         if vk is not None:
             vk.state, vk.cf, vk.ws, vk.ci, vk.iws = (views["vstate"], views["cf"],
@@ -402,6 +464,7 @@ class MonitorKernel:
         standing_reset(self.sd)
         if self.vfs_kernel is not None:
             self.vfs_kernel.reset()
+        system_reset(self.sysp, self.syss, self.prm, self.qstate)
 
     def vfs_args(self) -> tuple:
         if self.vfs_kernel is not None:
@@ -431,9 +494,13 @@ class MonitorKernel:
         return Y, EX
 
 
+_NF = len(MonitorKernel._F_PARTS)
+_HI = 2 * _NF  # header: (offset, size) per float part, n_in, (offset, size) per int part
+
+
 @njit
 def _unpack(F, I):
-    n_in = I[28]
+    n_in = I[_HI]
     ex = F[I[0]:I[0] + I[1]]
     mp = F[I[2]:I[2] + I[3]]
     lims = F[I[4]:I[4] + I[5]].reshape((2, n_in))
@@ -448,27 +515,30 @@ def _unpack(F, I):
     xc = F[I[22]:I[22] + I[23]]
     vy = F[I[24]:I[24] + I[25]]
     ws = F[I[26]:I[26] + I[27]]
-    ci = I[I[29]:I[29] + I[30]]
-    viws = I[I[31]:I[31] + I[32]]
-    return ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws
+    sy = (F[I[28]:I[28] + I[29]], F[I[30]:I[30] + I[31]], F[I[32]:I[32] + I[33]],
+          F[I[34]:I[34] + I[35]], I[I[_HI + 5]:I[_HI + 5] + I[_HI + 6]], F[I[36]:I[36] + I[37]],
+          I[I[_HI + 7]:I[_HI + 7] + I[_HI + 8]], F[I[38]:I[38] + I[39]])
+    ci = I[I[_HI + 1]:I[_HI + 1] + I[_HI + 2]]
+    viws = I[I[_HI + 3]:I[_HI + 3] + I[_HI + 4]]
+    return ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy
 
 
 @njit
 def monitor_step_packed(x, y, F, I):
     """:func:`monitor_step` with every array in the two buffers of
     :class:`MonitorKernel` (``F`` floats, ``I`` ints with the layout header)."""
-    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws = _unpack(F, I)
+    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
     monitor_step(x, y, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
-                 ws)
+                 ws, sy)
 
 
 @njit
 def monitor_run_packed(X, Y, EX, F, I):
     """:func:`monitor_step_packed` over every row of ``X`` (the batch path)."""
-    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws = _unpack(F, I)
+    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
     for k in range(X.shape[0]):
         monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
-                     viws, xc, vy, ws)
+                     viws, xc, vy, ws, sy)
 
 
 def compiled_monitor(log: pd.DataFrame, config: Any = None, warm: bool = True) -> Any:
@@ -541,6 +611,9 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
     for i in range(8):
         out[_REC_COLS[i]] = y[o + 24 + i]
         out[_ETA_COLS[i]] = y[o + 16 + i]
+    if k.with_system:
+        out["model_mismatch"] = y[o + 33] != 0.0
+        out["model_mismatch_reason"] = reason_text(y[o + 33:], k.vib_config)
     state = SYSTEM_STATES[int(y[o + 32])]
     reason = ""
     if ex[0] != 0.0 or odd:
@@ -588,29 +661,60 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     kinds = Y[:, o + 8:o + 16].astype(np.int64)
     for i in range(8):
         new[_FLAG_COLS[i]] = Y[:, o + i] != 0.0
-        new[_KIND_COLS[i]] = _KIND_OBJ[kinds[:, i]]
+        new[_KIND_COLS[i]] = codes_to_str(kinds[:, i], KIND_NAMES)
     for i in range(8):
         new[_REC_COLS[i]] = Y[:, o + 24 + i].copy()
         new[_ETA_COLS[i]] = Y[:, o + 16 + i].copy()
+    if k.with_system:
+        new["model_mismatch"] = Y[:, o + 33] != 0.0
+        new["model_mismatch_reason"] = _mismatch_reasons(Y[:, o + 33:], k.vib_config)
     codes = Y[:, o + 32].astype(np.int64)
-    new["system_state"] = _STATE_OBJ[codes]
-    reasons = np.full(n, "", dtype=object)
-    if (EX[:, 0] != 0.0).any():
-        rs = mon.inputs.clean_frame(log)[1]
-        reasons = np.array(rs, dtype=object)
-    t_raw = src[0]
-    for r in np.flatnonzero(codes != ST_OK):
-        reasons[r] = _reason(SYSTEM_STATES[codes[r]], float(t_raw[r]), float(EX[r, 1]),
-                             EX[r, 2] != 0.0, reasons[r])
-    new["system_reason"] = reasons
+    new["system_state"] = codes_to_str(codes, SYSTEM_STATES)
+    new["system_reason"] = _reasons(mon, log, codes, src[0], EX)
     return _with_columns(log, new)
+
+
+def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> np.ndarray:
+    """``model_mismatch_reason`` of every row of the system columns ``S`` (one text per
+    distinct row)."""
+    out = np.full(S.shape[0], "", dtype=object)
+    memo: dict[bytes, str] = {}
+    for r in np.flatnonzero(S[:, 0] != 0.0):
+        key = S[r].tobytes()
+        txt = memo.get(key)
+        if txt is None:
+            txt = memo[key] = reason_text(S[r].tolist(), vib_config)
+        out[r] = txt
+    return out
+
+
+def _reasons(mon: Any, log: pd.DataFrame, codes: np.ndarray, t_raw: np.ndarray,
+             EX: np.ndarray) -> Any:
+    """The ``system_reason`` column: empty where the state is ``ok``, text built only
+    for the other rows (no string object per row)."""
+    n = len(codes)
+    base: list[str] | None = None
+    if (EX[:, 0] != 0.0).any():
+        base = mon.inputs.clean_frame(log)[1]
+    rows = np.flatnonzero(codes != ST_OK)
+    if base is None and rows.size == 0:
+        return codes_to_str(np.zeros(n, dtype=np.int64), ("",))
+    texts = [_reason(SYSTEM_STATES[codes[r]], float(t_raw[r]), float(EX[r, 1]),
+                     EX[r, 2] != 0.0, base[r] if base is not None else "") for r in rows]
+    if base is None:  # names: "" and each text; codes point at them
+        idx = np.zeros(n, dtype=np.int64)
+        idx[rows] = np.arange(1, rows.size + 1)
+        return codes_to_str(idx, ("", *texts))
+    reasons = np.array(base, dtype=object)
+    reasons[rows] = texts
+    return strings_to_str(reasons)
 
 
 def _with_columns(log: pd.DataFrame, new: dict[str, Any]) -> pd.DataFrame:
     """A copy of ``log`` with the columns ``new`` (replaced in place when ``log`` has
     them, else appended in order), built in one go."""
     bare = log
-    add = pd.DataFrame(new, index=log.index)
+    add = pd.DataFrame(new, index=log.index, copy=False)  # fresh arrays: no copy needed
     if not any(c in bare.columns for c in new):
         return pd.concat([bare, add], axis=1)
     order = list(bare.columns) + [c for c in new if c not in bare.columns]

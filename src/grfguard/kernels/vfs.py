@@ -963,10 +963,10 @@ class VFSKernel:
         self.body_inertia = np.ascontiguousarray(kin.body_inertia, dtype=float)
         self.corner_radius = np.ascontiguousarray(kin.corner_radius, dtype=float)
         bs, as_, zs = [], [], []
-        from scipy.signal import butter, lfilter_zi  # (a slow import: only when built)
+        from grfguard._iir import butter_lowpass, lfilter_zi  # scipy's, without scipy.signal
 
         for cut in (cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff):
-            b, a = butter(cfg.filter_order, cut, btype="low", fs=1.0 / cfg.dt)
+            b, a = butter_lowpass(cfg.filter_order, cut, 1.0 / cfg.dt)
             b, a = np.asarray(b, float), np.asarray(a, float)
             bs.append(b)
             as_.append(a)

@@ -42,11 +42,13 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-
-import mujoco
+from typing import TYPE_CHECKING
 
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINTS_PER_LEG, SIDES, RobotConfig
+
+if TYPE_CHECKING:
+    import mujoco
 
 __all__ = [
     "BodySpec",
@@ -426,6 +428,8 @@ def build_model(robot: RobotConfig) -> mujoco.MjModel:
     Returns:
         The compiled ``mujoco.MjModel``.
     """
+    import mujoco  # lazy: only the MuJoCo model needs it
+
     xml = build_mjcf(robot)
     try:
         return mujoco.MjModel.from_xml_string(xml)

@@ -25,11 +25,11 @@ class HandOver:
     """First-order blend weight ``w`` between measurement (0) and reconstruction (1).
 
     Args:
-        tau_s: Time constant of the blend [s].
-        dt_s: Sampling period [s].
+        tau_s: Time constant of the blend [s] (``MonitorConfig.blend_s``).
+        dt_s: Sampling period of the log [s] (no default: 1 kHz is not assumed).
     """
 
-    def __init__(self, tau_s: float = 0.03, dt_s: float = 1e-3) -> None:
+    def __init__(self, tau_s: float, dt_s: float) -> None:
         self.alpha = min(1.0, dt_s / tau_s) if tau_s > 0 else 1.0
         self.w = 0.0
 

@@ -1,0 +1,52 @@
+"""The numpy Butterworth design (:mod:`grfguard._iir`) equals scipy.signal bit for bit,
+and importing the monitor does not import scipy.signal."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.signal import butter, lfilter_zi
+
+from grfguard._iir import butter_lowpass
+from grfguard._iir import lfilter_zi as np_lfilter_zi
+
+
+@pytest.mark.parametrize("order", range(1, 9))
+@pytest.mark.parametrize("fs", [100.0, 333.3, 1000.0, 2000])
+def test_butter_equals_scipy_bitwise(order: int, fs: float) -> None:
+    for cut in [*np.geomspace(0.05, 0.499 * fs, 25), 1.0, 10.0, 25.0, 30.0]:
+        b, a = butter(order, cut, btype="low", fs=fs)
+        b2, a2 = butter_lowpass(order, cut, fs)
+        assert b2.dtype == b.dtype and a2.shape == a.shape
+        assert np.array_equal(b, b2) and np.array_equal(a, a2), (order, fs, cut)
+        try:
+            zi = lfilter_zi(b, a)
+        except np.linalg.LinAlgError:  # a very low cut-off at a high order: singular
+            with pytest.raises(np.linalg.LinAlgError):
+                np_lfilter_zi(b2, a2)
+            continue
+        assert np.array_equal(zi, np_lfilter_zi(b2, a2)), (order, fs, cut)
+
+
+def test_butter_refuses_what_scipy_refuses() -> None:
+    for cut in (0.0, -1.0, 500.0, 600.0):
+        with pytest.raises(ValueError):
+            butter(2, cut, btype="low", fs=1000.0)
+        with pytest.raises(ValueError):
+            butter_lowpass(2, cut, 1000.0)
+    with pytest.raises(ValueError):
+        butter_lowpass(2.5, 10.0, 1000.0)  # type: ignore[arg-type]
+
+
+def test_monitor_import_does_not_load_scipy_signal() -> None:
+    code = ("import sys, grfguard.cli, grfguard.pipeline, grfguard.estimate.vfs, "
+            "grfguard.kernels.vfs; from grfguard.estimate.vfs import VirtualForceSensor; "
+            "VirtualForceSensor(); "
+            "print(sorted(m for m in ('scipy.signal', 'matplotlib', 'plotly') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
