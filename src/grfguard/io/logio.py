@@ -463,6 +463,7 @@ def find_time_gaps(df: pd.DataFrame, gap_s: float | None = None) -> list[list[fl
     first row after the gap. Steps across ``segment`` boundaries are not gaps."""
     if TIME not in df.columns or len(df) < 3:
         return []
+    df = _bare(df)
     t = df[TIME].to_numpy(dtype=float)
     dt = np.diff(t)
     if SEGMENT in df.columns:
@@ -473,6 +474,16 @@ def find_time_gaps(df: pd.DataFrame, gap_s: float | None = None) -> list[list[fl
     limit = gap_s if gap_s is not None else max(GAP_FACTOR * float(np.median(pos)), MIN_GAP_S)
     idx = np.flatnonzero(dt > limit)
     return [[int(i) + 1, float(t[i]), float(t[i + 1])] for i in idx]
+
+
+def _bare(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` without its metadata (no copy of the data): pandas deep-copies ``attrs``
+    on every column access, which costs more than the checks on a long log."""
+    if not df.attrs:
+        return df
+    bare = df.copy(deep=False)
+    bare.attrs = {}
+    return bare
 
 
 def _warn_gaps(gaps: list[list[float]], where: str) -> None:
@@ -502,6 +513,7 @@ def validate_log(
         raise LogFormatError(
             f"{where}: missing column 'time' [s]; every log needs a strictly increasing time column"
         )
+    df = _bare(df)
     req = list(required) if required is not None else []
     missing = [c for c in req if c not in df.columns]
     if missing:
