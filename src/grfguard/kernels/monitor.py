@@ -43,7 +43,7 @@ import pandas as pd
 from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
 from grfguard.io.codes import codes_to_str, strings_to_str
 from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME, ZMP_REF
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import njit_nort
 from grfguard.kernels.detect import (
     FLAG,
     G_PREV_INVALID,
@@ -133,7 +133,7 @@ def output_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]
     return (*OUT_COLUMNS, *det) if with_vfs else det
 
 
-@njit
+@njit_nort
 def _input_guard(xin, xc, mp, lims):
     """``InputGuard.clean_row``: ``xc`` = ``xin`` with implausible values NaN; True when
     something was rejected."""
@@ -156,7 +156,7 @@ def _input_guard(xin, xc, mp, lims):
     return rejected
 
 
-@njit
+@njit_nort
 def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
     """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break,
     or the row's precomputed columns); returns ``valid`` (``Monitor._valid``)."""
@@ -187,7 +187,7 @@ def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viw
     return (flag == 1.0) if math.isfinite(flag) else fin
 
 
-@njit
+@njit_nort
 def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     """``Monitor._prepare``: range check of the virtual forces, ``Continuity.after``,
     unusable virtual outputs set to NaN; returns ``(bounded, state code)``."""
@@ -224,7 +224,7 @@ def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     return bounded, ST_OK
 
 
-@njit
+@njit_nort
 def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
     """``Monitor._finish``: an implausible reading's flag reported as ``spikes``, the
     recovered force within the plausible range; writes the detector columns."""
@@ -247,7 +247,7 @@ def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
         yout[o + 24 + i] = r
 
 
-@njit
+@njit_nort
 def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
                  xc, vy, ws, sy):
     """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
@@ -309,7 +309,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     ex[3] = 1.0 if bounded else 0.0
 
 
-@njit
+@njit_nort
 def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
                 ws, sy):
     """:func:`monitor_step` over every row of ``X`` into ``Y`` and ``EX`` (the batch path)."""
@@ -498,7 +498,7 @@ _NF = len(MonitorKernel._F_PARTS)
 _HI = 2 * _NF  # header: (offset, size) per float part, n_in, (offset, size) per int part
 
 
-@njit
+@njit_nort
 def _unpack(F, I):
     n_in = I[_HI]
     ex = F[I[0]:I[0] + I[1]]
@@ -523,7 +523,7 @@ def _unpack(F, I):
     return ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy
 
 
-@njit
+@njit_nort
 def monitor_step_packed(x, y, F, I):
     """:func:`monitor_step` with every array in the two buffers of
     :class:`MonitorKernel` (``F`` floats, ``I`` ints with the layout header)."""
@@ -532,7 +532,7 @@ def monitor_step_packed(x, y, F, I):
                  ws, sy)
 
 
-@njit
+@njit_nort
 def monitor_run_packed(X, Y, EX, F, I):
     """:func:`monitor_step_packed` over every row of ``X`` (the batch path)."""
     ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
