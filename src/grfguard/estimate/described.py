@@ -124,7 +124,7 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
     Corner cells: :func:`with_described_vfs` (unless the log already has the columns),
     then :class:`~grfguard.pipeline.Monitor` on its precomputed-columns path, with the
     robot's shipped thresholds (:func:`described_thresholds`) when ``config`` carries
-    the default ones (SURALP's); then, unless ``track`` is False, the recovered force
+    the built-in defaults; then, unless ``track`` is False, the recovered force
     of a cell flagged offset, drift or gain is tracked against the cell noise
     (``sigma_swing_n`` of the thresholds) by :func:`grfguard.recover.track
     .track_recovered`, a better estimate of the true force than ``reading - offset``.

@@ -641,7 +641,7 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     n = len(log)
     cols = list(k.in_cols)
     src = [(_column(log, c) if c in log.columns else None) for c in cols]
-    Y = np.empty((n, len(k.out_cols)))
+    Y = np.empty((n, len(k.out_cols)), order="F")  # columns contiguous: no copy each
     EX = np.empty((n, N_EX))
     X = np.empty((min(chunk, n), len(cols)))
     for a in range(0, n, chunk):
@@ -656,15 +656,15 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     o = 0
     if k.with_vfs:
         for j, c in enumerate(OUT_COLUMNS):
-            new[c] = Y[:, j].copy()
+            new[c] = Y[:, j]
         o = _NV
     kinds = Y[:, o + 8:o + 16].astype(np.int64)
     for i in range(8):
         new[_FLAG_COLS[i]] = Y[:, o + i] != 0.0
         new[_KIND_COLS[i]] = codes_to_str(kinds[:, i], KIND_NAMES)
     for i in range(8):
-        new[_REC_COLS[i]] = Y[:, o + 24 + i].copy()
-        new[_ETA_COLS[i]] = Y[:, o + 16 + i].copy()
+        new[_REC_COLS[i]] = Y[:, o + 24 + i]
+        new[_ETA_COLS[i]] = Y[:, o + 16 + i]
     if k.with_system:
         new["model_mismatch"] = Y[:, o + 33] != 0.0
         new["model_mismatch_reason"] = _mismatch_reasons(Y[:, o + 33:], k.vib_config)
@@ -674,18 +674,20 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     return _with_columns(log, new)
 
 
-def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> np.ndarray:
+def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> Any:
     """``model_mismatch_reason`` of every row of the system columns ``S`` (one text per
-    distinct row)."""
-    out = np.full(S.shape[0], "", dtype=object)
-    memo: dict[bytes, str] = {}
+    distinct row, the column built from codes: no string object per row)."""
+    idx = np.zeros(S.shape[0], dtype=np.int64)
+    names = [""]
+    memo: dict[bytes, int] = {}
     for r in np.flatnonzero(S[:, 0] != 0.0):
         key = S[r].tobytes()
-        txt = memo.get(key)
-        if txt is None:
-            txt = memo[key] = reason_text(S[r].tolist(), vib_config)
-        out[r] = txt
-    return out
+        j = memo.get(key)
+        if j is None:
+            j = memo[key] = len(names)
+            names.append(reason_text(S[r].tolist(), vib_config))
+        idx[r] = j
+    return codes_to_str(idx, names)
 
 
 def _reasons(mon: Any, log: pd.DataFrame, codes: np.ndarray, t_raw: np.ndarray,

@@ -6,16 +6,15 @@ angular momentum, the Butterworth low-passes (direct form II transposed, as
 ``scipy.signal.lfilter``), Newton-Euler ZMP, kinematic corner contact, the
 sole-compliance prior and the corner QP (:mod:`grfguard.kernels.nnls`), the per-foot
 totals and CoPs. :func:`vfs_run` loops the same step over a log in one compiled call, so
-streaming and batch are identical by construction. Both reproduce
-:class:`grfguard.estimate.vfs.VirtualForceSensor` (``update`` / ``run``) in the same
-operation order; the only differences are the rounding of the corner QP (the reference
-uses ``scipy.optimize.nnls``; tests and BENCHMARKS.md give the measured size).
+streaming and batch are identical by construction. Both are what
+:class:`grfguard.estimate.vfs.VirtualForceSensor` (``update`` / ``run``) runs; the numpy
+stages they reproduce in the same operation order are ``tests/reference/vfs_stages.py``.
 
-Supported settings: the default estimator (``com_method="multibody"``,
-``split_method="qp"`` with the compliance prior ``contact_stiffness_per_kg > 0``,
-``zmp_filter="direct"``, ``anchor_attitude_time_constant = 0``), with or without the
-accelerometer, gyro, planned contact, angular momentum, kinematic contact.
-:meth:`VFSKernel.supports` says whether a :class:`VFSConfig` is covered.
+Settings: every :class:`VFSConfig`. The non-default stages (the paper's CoM filter and
+split, the pendulum Kalman ZMP, the anchor attitude) are in
+:mod:`grfguard.kernels.vfs_paper`, called from the hooks marked ``vfs_paper`` in
+``_step``; the rigid QP (``contact_stiffness_per_kg = 0``) is the compliance QP with a
+uniform prior.
 
 Array layouts (one row per sample):
 
