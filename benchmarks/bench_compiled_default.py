@@ -89,7 +89,7 @@ def main() -> None:
     print(f"Machine: {platform.machine()}, {os.cpu_count()} logical cores, Python "
           f"{platform.python_version()}; load average {os.getloadavg()[0]:.1f}.")
     print()
-    print("| what | compiled VFS (default) | pure-Python VFS (`compiled=False`) | ratio |")
+    print("| what | compiled (default) | `compiled=False` (Python detector) | ratio |")
     print("| --- | --- | --- | --- |")
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "walk.parquet"

@@ -5,10 +5,10 @@ reference timed in the same run (so the figure holds on a busy machine):
 
 * streaming virtual force sensor (SURALP, default settings): per-sample median / p99 / max
   of the array call ``update_array`` over >= 1e5 samples and of the dict call ``update``;
-  reference ``VirtualForceSensor.update`` (pure Python);
+  reference ``PythonVFS.update`` (tests/reference/vfs_stages.py, numpy);
 * whole monitor streaming: ``Monitor.update`` with the compiled sensor vs. with the
   pure-Python one (the detector itself is still Python);
-* batch: ``vfs_batch`` samples/s vs. ``VirtualForceSensor.run``; ``Monitor.run`` with
+* batch: ``vfs_batch`` samples/s vs. ``PythonVFS.run``; ``Monitor.run`` with
   both sensors;
 * forward kinematics, batch samples/s: SURALP and a random 30-joint tree, vs. per-sample
   ``mj_kinematics`` + ``mj_comPos`` called from Python;
@@ -43,7 +43,6 @@ import numpy as np
 from _common import update_section
 
 from grfguard.detect import Monitor, MonitorConfig
-from grfguard.estimate.vfs import VirtualForceSensor
 from grfguard.kernels import CompiledVirtualForceSensor, vfs_batch, warm_up
 from grfguard.kernels.fk import TreeModel, fk_batch
 from grfguard.kernels.nnls import new_scratch, prior_qp
@@ -54,6 +53,7 @@ from grfguard.model.robot import SURALP
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
 from reference.nnls_split import nnls_prior_qp as _solve_core  # noqa: E402  (scipy nnls)
+from reference.vfs_stages import PythonVFS  # noqa: E402  (the numpy stages)
 
 SECTION = "## Compiled kernels"
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
@@ -146,7 +146,7 @@ def main() -> None:
     X = np.ascontiguousarray(np.tile(X1, (reps, 1))[: a.samples])
 
     # ---------------------------------------------------------------- accuracy
-    ref_df = VirtualForceSensor.for_log(walk, compiled=False).run(walk)
+    ref_df = PythonVFS.for_log(walk).run(walk)
     t0 = time.perf_counter()
     out_df = vfs_batch(walk)
     force_cols = [c for c in ref_df.columns if c.startswith(("vfs_r", "vfs_l", "vfs_total"))]
@@ -163,7 +163,7 @@ def main() -> None:
     n_dict = min(20_000, len(rows))
     cv.reset()
     dic = per_sample(lambda i: cv.update(rows[i]), n_dict)
-    py = VirtualForceSensor.for_log(walk, compiled=False)
+    py = PythonVFS.for_log(walk)
     n_ref = 1500
     ref = per_sample(lambda i: py.update(rows[i]), n_ref)
     # streaming == batch on the stream just run
@@ -175,7 +175,7 @@ def main() -> None:
     # ---------------------------------------------------------------- whole monitor (stream)
     mcfg = MonitorConfig()
     mon_c = Monitor(mcfg, CompiledVirtualForceSensor.for_log(walk, mcfg.vfs))
-    mon_p = Monitor(mcfg, VirtualForceSensor.for_log(walk, mcfg.vfs, compiled=False))
+    mon_p = Monitor(mcfg, PythonVFS.for_log(walk, mcfg.vfs))
     mon_c_t = per_sample(lambda i: mon_c.update(rows[i]), 5000)
     mon_p_t = per_sample(lambda i: mon_p.update(rows[i]), 1000)
 
@@ -190,13 +190,13 @@ def main() -> None:
         b_cpu = max(b_cpu, X.shape[0] / max(time.process_time() - c0, 1e-9))
     short = walk.iloc[:3000]
     t0 = time.perf_counter()
-    VirtualForceSensor.for_log(short, compiled=False).run(short)
+    PythonVFS.for_log(short).run(short)
     b_ref = len(short) / (time.perf_counter() - t0)
     t0 = time.perf_counter()
     Monitor(mcfg, CompiledVirtualForceSensor.for_log(walk, mcfg.vfs)).run(walk)
     m_run_c = n_walk / (time.perf_counter() - t0)
     t0 = time.perf_counter()
-    Monitor(mcfg, VirtualForceSensor.for_log(short, mcfg.vfs, compiled=False)).run(short)
+    Monitor(mcfg, PythonVFS.for_log(short, mcfg.vfs)).run(short)
     m_run_p = len(short) / (time.perf_counter() - t0)
 
     # ---------------------------------------------------------------- kinematics
@@ -321,7 +321,7 @@ def main() -> None:
         "| what | compiled | plain reference | ratio |",
         "| --- | --- | --- | --- |",
         f"| VFS streaming, array call `update_array` (µs/sample, median / p99 / max over "
-        f"{len(arr):,}) | {am:.1f} / {ap99:.1f} / {amax:.0f} | `VirtualForceSensor.update` "
+        f"{len(arr):,}) | {am:.1f} / {ap99:.1f} / {amax:.0f} | `PythonVFS.update` "
         f"{rm:.0f} / {rp99:.0f} / {rmax:.0f} (over {n_ref:,}) | {ratio(rm / am)} (median) |",
         f"| VFS streaming, dict call `update` (µs, median / p99 / max over {n_dict:,}) | "
         f"{dm:.1f} / {dp99:.1f} / {dmax:.0f} | same | {ratio(rm / dm)} |",
@@ -330,7 +330,7 @@ def main() -> None:
         f"{cmax:.0f} | {pm:.0f} / {pp99:.0f} / {pmax:.0f} | {ratio(pm / cm)} |",
         f"| VFS batch `vfs_run`, one compiled loop (samples/s, wall; CPU time "
         f"{b_cpu / 1e3:.0f} k/s = {1e6 / b_cpu:.2f} µs/sample) | {b_wall / 1e3:.0f} k "
-        f"| `VirtualForceSensor.run` (pure Python) {b_ref / 1e3:.1f} k | "
+        f"| `PythonVFS.run` (tests/reference, numpy) {b_ref / 1e3:.1f} k | "
         f"{ratio(b_wall / b_ref)} |",
         f"| `Monitor.run` batch (samples/s, 20 s walk) | {m_run_c / 1e3:.1f} k | "
         f"{m_run_p / 1e3:.1f} k | {ratio(m_run_c / m_run_p)} |",
@@ -359,7 +359,8 @@ def main() -> None:
     lines += [
         "",
         f"Accuracy on the 20 s walk: corner forces and totals within {acc_n:.1e} N of the "
-        f"pure-Python sensor (`compiled=False`), CoM and ZMP within {acc_m:.1e} m; streaming "
+        f"numpy stages (tests/reference/vfs_stages.py), CoM and ZMP within {acc_m:.1e} m; "
+        f"streaming "
         f"== batch bit for bit: {same}. The corner QP is within 3e-12 N of the exact "
         "(rational) minimiser on random problems (`tests/test_kernels_vfs.py`), "
         "`scipy.optimize.nnls` within 2e-9 N (and 2e-6 N on ill-conditioned samples of a "

@@ -18,6 +18,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -29,6 +30,9 @@ from grfguard.estimate.vfs import VFSConfig, VirtualForceSensor  # noqa: E402
 from grfguard.evaluate.vfs_metrics import evaluate_vfs  # noqa: E402
 from grfguard.model.robot import SURALP, RobotConfig  # noqa: E402
 from grfguard.sim import GaitConfig, NoiseConfig, simulate  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from reference.vfs_stages import PythonVFS  # noqa: E402  (the numpy stages)
 
 ROOT = Path(__file__).resolve().parent.parent
 SECTION = "## Virtual force sensor"
@@ -113,10 +117,10 @@ def speed(d: float) -> str:
         "| streaming p99 [us] |",
         "|---|---|---|---|---|",
     ]
-    # the first row again on the Python stages: the plain reference of the compiled kernel
+    # the first row again on the numpy stages (tests/reference): the plain reference
     runs = [(m, c, True) for m, c in METHODS] + [(METHODS[0][0], METHODS[0][1], False)]
     for mname, cfg, compiled in runs:
-        vfs = VirtualForceSensor.for_log(log, cfg, compiled=compiled)
+        vfs = (VirtualForceSensor if compiled else PythonVFS).for_log(log, cfg)
         vfs.run(log.iloc[:100])  # compile or load the kernels outside the timing
         t0 = time.perf_counter()
         vfs.run(log)
@@ -127,7 +131,7 @@ def speed(d: float) -> str:
             t1 = time.perf_counter()
             vfs.update(row)
             ts[i] = time.perf_counter() - t1
-        engine = "compiled" if vfs.compiled else "Python stages"
+        engine = "compiled" if compiled else "numpy stages (tests/reference)"
         lines.append(
             f"| {mname} | {engine} | {batch:,.0f} | {np.median(ts) * 1e6:.1f} | "
             f"{np.percentile(ts, 99) * 1e6:.1f} |"

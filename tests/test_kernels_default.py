@@ -18,6 +18,7 @@ from grfguard.io.logio import load_log, write_log
 from grfguard.kernels import CompiledVirtualForceSensor
 from grfguard.model.robot import SURALP
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
+from reference.vfs_stages import PythonVFS
 
 
 @pytest.fixture(scope="module")
@@ -43,20 +44,35 @@ def _compare(ref: pd.DataFrame, out: pd.DataFrame) -> None:
     assert np.nanmax(np.abs(a - b)) <= 1e-9
 
 
+def _python_monitor(log: pd.DataFrame, monkeypatch) -> Monitor:
+    """The pure-Python reference: Python detector around the numpy VFS stages."""
+    import grfguard.estimate.vfs as vfs_mod
+
+    with monkeypatch.context() as m:
+        m.setattr(vfs_mod, "VirtualForceSensor", PythonVFS)
+        mon = Monitor.for_log(log, compiled=False)
+    assert type(mon.vfs) is PythonVFS
+    return mon
+
+
 def test_for_log_default_is_compiled_and_opt_out_is_python(broken_log) -> None:
     assert isinstance(Monitor.for_log(broken_log).vfs, CompiledVirtualForceSensor)
     assert Monitor.for_log(broken_log).vfs.compiled
     for mon in (Monitor.for_log(broken_log, compiled=False),
                 Monitor.for_log(broken_log, MonitorConfig(compiled=False))):
-        assert type(mon.vfs) is VirtualForceSensor and not mon.vfs.compiled
-    # settings the kernel does not cover keep the Python stages
+        # the Python detector around the (always compiled) virtual sensor
+        assert type(mon.vfs) is VirtualForceSensor and mon.vfs.compiled
+        assert mon.compiled_reason() == "compiled=False"
+    # the paper's sensor runs compiled; the monitor around it (which does not pass the
+    # force sensors to the sensor's step) runs the Python stages
     paper = Monitor.for_log(broken_log, MonitorConfig(vfs=VFSConfig.paper()))
-    assert type(paper.vfs) is VirtualForceSensor and not paper.vfs.compiled
+    assert type(paper.vfs) is VirtualForceSensor and paper.vfs.compiled
+    assert "paper" in paper.compiled_reason()
     assert MonitorConfig.from_toml_text(MonitorConfig(compiled=False).to_toml()).compiled is False
 
 
-def test_compiled_default_equals_python_across_breaks(broken_log) -> None:
-    ref = Monitor.for_log(broken_log, compiled=False).run(broken_log)
+def test_compiled_default_equals_python_across_breaks(broken_log, monkeypatch) -> None:
+    ref = _python_monitor(broken_log, monkeypatch).run(broken_log)
     states = set(ref["system_state"])
     assert {"time_gap", "input_invalid", "settling"} <= states
     assert ref["flag_l3"].any() and not ref[["flag_r1", "flag_r2", "flag_l1"]].any().any()

@@ -78,9 +78,10 @@ def test_all_gaps_corrections_meet_the_targets(cal_walk, corr, corr_m):
     assert cfg.vfs.use_accelerometer is False
     assert cfg.vfs == quiet_vfs_config(VFSConfig())  # the monitor's quiet twin
     assert corrected_config(None, None) == MonitorConfig()
-    # the encoder offsets are fitted only to flatten the soles: bounded by their prior
+    # of the encoder offsets only each leg's net sole tilt is kept, on its ankle
     assert set(corr.encoder_offset_deg) == set(JOINT_NAMES)
-    assert max(abs(v) for v in corr.encoder_offset_deg.values()) < 1.5
+    assert all(v == 0.0 for j, v in corr.encoder_offset_deg.items() if "ankle" not in j)
+    assert 0.0 < max(abs(v) for v in corr.encoder_offset_deg.values()) < 2.5
 
 
 def test_calibrated_robot_detects_the_paper_offsets_without_false_alarms(
@@ -92,6 +93,9 @@ def test_calibrated_robot_detects_the_paper_offsets_without_false_alarms(
     cfg = corrected_config(MonitorConfig(), corr)
     fixed = apply_corrections(cal_walk, corr)
     th = calibrate_thresholds([fixed[fixed["time"] < 25.0]], config=cfg)
+    # per-corner threshold within 3x the exact model's (0.30 on its 60 s walk); the
+    # issue's 2x is measured (and missed) in benchmarks/bench_selfcal.py
+    assert th.corner_sigma * th.corner_h < 0.9
     walk = simulate(gait=GaitConfig(duration=12.0), seed=3, reality=gap)
     faulty = inject_faults(
         walk, [parse_fault_spec(s) for s in ("r2=offset:100@5", "r4=offset:-100@5")], seed=0)

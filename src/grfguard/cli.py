@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.table import Table
 
 from grfguard._cliutil import ROBOT_HELP
 from grfguard._term import cli_friendly as _friendly
@@ -238,11 +237,37 @@ def run(
     ] = True,
 ) -> None:
     """Run the virtual force sensor, fault detection and recovery over a log."""
+    n = run_log(log, output, config=config, thresholds=thresholds, method=method, vfs=vfs,
+                robot=robot, time_order=time_order, unit_check=unit_check,
+                topics_map=topics_map, compiled=compiled)
+    _say(f"wrote {output}: {n} samples")
+
+
+def run_log(
+    log: Path,
+    output: Path,
+    *,
+    config: Path | None = None,
+    thresholds: Path | None = None,
+    method: str | None = None,
+    vfs: str | None = None,
+    robot: str | None = None,
+    time_order: str = "strict",
+    unit_check: bool = True,
+    topics_map: Path | None = None,
+    compiled: bool = True,
+    phase: Any = None,
+) -> int:
+    """``grfguard run`` without the command line: read ``log``, run the monitor, write
+    ``output``; returns the number of samples written. ``phase(name)`` (optional) is
+    called at the end of each step (``read``, ``checks``, ``monitor_setup``,
+    ``monitor_run``, ``write``: ``benchmarks/bench_run_cli.py`` times them)."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.anyread import read_any
     from grfguard.io.logio import write_log
     from grfguard.io.safe import check_output
 
+    mark = phase if phase is not None else (lambda name: None)
     rob = _check_run_inputs(config, thresholds, robot)
     check_output(output, inputs=[log, config, thresholds, robot, topics_map], what="output log")
     if rob is not None and hasattr(rob, "sensing"):  # a described robot: its columns
@@ -253,13 +278,18 @@ def run(
         df.attrs.setdefault("sensing", rob.sensing)
     else:
         df = read_any(log, topics_map, time_order=time_order, copy=False)  # read-only columns
+    mark("read")
     robot_for_log(df, rob, str(log))
     if unit_check:
         check_log_plausible(df, rob, str(log))
+    mark("checks")
     result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs,
-                           compiled=compiled)
+                           compiled=compiled, mark=mark)
+    mark("monitor_run")
+    del df
     write_log(result, output)
-    _say(f"wrote {output}: {len(result)} samples")
+    mark("write")
+    return len(result)
 
 
 def _check_run_inputs(config: Path | None, thresholds: Path | None, robot: str | None) -> Any:
@@ -301,6 +331,7 @@ def _run_monitor(
     method: str | None,
     vfs: str | None = None,
     compiled: bool = True,
+    mark: Any = None,
 ) -> Any:
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
@@ -317,7 +348,10 @@ def _run_monitor(
         from grfguard.cli_calib import corrected_log_and_config
 
         df, cfg = corrected_log_and_config(df, thresholds, cfg)
-    return Monitor.for_log(df, config=cfg).run(df)
+    mon = Monitor.for_log(df, config=cfg)
+    if mark is not None:
+        mark("monitor_setup")
+    return mon.run(df)
 
 
 # -------------------------------------------------------------------------- evaluate
@@ -365,6 +399,8 @@ def _print_evaluation(result: dict[str, Any]) -> None:
     for section, data in result.items():
         if not isinstance(data, dict):
             continue
+        from rich.table import Table  # lazy: only `evaluate` prints tables
+
         table = Table(title=section)
         table.add_column("metric")
         table.add_column("value")

@@ -465,12 +465,47 @@ class PythonVFS:
         self._last["vfs_valid"] = 1.0
         return pd.DataFrame(result, index=log.index)
 
+    def input_valid(self, log: pd.DataFrame) -> np.ndarray:
+        """(T,) bool: rows whose inputs the sensor can use (finite quaternion, joints...)."""
+        return self._inputs(log).valid()
+
     def resync(self) -> None:
         """Forget the finite-difference history only (a continuity break): the next two
         samples have no rate; filters, attitude and odometry keep their state."""
         self._hist = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}
         self._prev_frames = None
         self._prev_L = None
+
+    def run_resynced(self, log: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
+        """:meth:`run` with :meth:`resync` before every row where ``resync`` is True (the
+        batch twin of a streaming monitor resyncing at breaks); the sensor is reset after.
+        """
+        self.reset()
+        self.check_columns(log.columns)
+        n = len(log)
+        inp = self._inputs(log)
+        valid = inp.valid()
+        result = {k: np.full(n, np.nan) for k in VFS_OUTPUT_COLUMNS}
+        result["vfs_valid"] = valid.astype(float)
+        starts = sorted({0, *np.flatnonzero(resync).tolist(), n})
+        outs: dict[str, list[np.ndarray]] = {}
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            idx = a + np.flatnonzero(valid[a:b])
+            if a > 0 and resync[a]:
+                self.resync()
+            if idx.size:
+                for k, val in self._process(inp.take(idx)).items():
+                    outs.setdefault(k, []).append(np.asarray(val, float))
+        if outs:
+            pos = np.maximum.accumulate(np.where(valid, np.cumsum(valid) - 1, -1))
+            has = pos >= 0
+            for k, parts in outs.items():
+                v = np.concatenate(parts)
+                col = np.full(n, np.nan)
+                col[has] = v[pos[has]]
+                result[k] = col
+        self.reset()
+        return pd.DataFrame(result, index=log.index)
 
     # ------------------------------------------------------------------ stages
     def _process(self, inp: _Inputs) -> dict[str, np.ndarray]:

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import njit, njit_nort
 
 __all__ = [
     "KIND_NAMES", "SOURCE_NAMES", "N_SS", "N_GS", "N_PRM", "detect_params", "detect_step",
@@ -136,7 +136,7 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
     return p
 
 
-@njit
+@njit_nort
 def _clear(s):
     """``SensorState.clear`` of one row of ``ss``."""
     s[FLAG] = 0.0
@@ -157,7 +157,7 @@ def _clear(s):
     s[SETA] = _NAN
 
 
-@njit
+@njit_nort
 def reset_state(ss, gs):
     """Everything back to the state of a new monitor (detector, recovery, guards)."""
     for i in range(ss.shape[0]):
@@ -182,7 +182,7 @@ def reset_state(ss, gs):
     gs[G_RESET_CLOCK] = _NAN
 
 
-@njit
+@njit_nort
 def _reset_timeline(gs):
     """``ContactTimeline.reset``."""
     for f in range(2):
@@ -202,7 +202,7 @@ def new_state() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------- exact sums
-@njit
+@njit_nort
 def _fsum(vals, n, part):
     """``math.fsum(vals[:n])`` (Shewchuk's algorithm with CPython's final rounding) for
     finite values; ``part`` is scratch of at least ``n`` floats."""
@@ -247,13 +247,13 @@ def _fsum(vals, n, part):
 
 
 # ---------------------------------------------------------------- gates
-@njit
+@njit_nort
 def _expected_swing(gs, f):
     d = gs[G_SWD + f]
     return d if math.isfinite(d) else gs[G_SWD + 1 - f]
 
 
-@njit
+@njit_nort
 def _in_valid_swing(gs, prm, f, t):
     since = t - gs[G_LO + f]
     exp_sw = _expected_swing(gs, f)
@@ -261,7 +261,7 @@ def _in_valid_swing(gs, prm, f, t):
             and since <= exp_sw - prm[P_GBTD])
 
 
-@njit
+@njit_nort
 def _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, contact):
     """``ContactTimeline.step``: gates per foot (before the touchdown guard)."""
     for f in range(2):
@@ -298,7 +298,7 @@ def _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, c
                                    and _in_valid_swing(gs, prm, o, t)) else 0.0
 
 
-@njit
+@njit_nort
 def _touchdown_guard(gs, prm, ss, f, t, x):
     """``ContactTimeline.touchdown_guard`` of foot ``f``."""
     if gs[G_GUARD + f] != 0.0:
@@ -317,7 +317,7 @@ def _touchdown_guard(gs, prm, ss, f, t, x):
 
 
 # ---------------------------------------------------------------- fits
-@njit
+@njit_nort
 def _swing_fit(s):
     """``SwingFit.fit``: (a, b, sd, se)."""
     n = s[FN]
@@ -337,7 +337,7 @@ def _swing_fit(s):
     return a, b, sd, sd / math.sqrt(ctt)
 
 
-@njit
+@njit_nort
 def _swing_add(s, tau, x):
     s[FN] += 1.0
     s[FST] += tau
@@ -347,7 +347,7 @@ def _swing_add(s, tau, x):
     s[FSXX] += x * x
 
 
-@njit
+@njit_nort
 def _stance_add(s, res, load, factor):
     """``StanceFit.add``."""
     if not (math.isfinite(res) and math.isfinite(load)):
@@ -362,7 +362,7 @@ def _stance_add(s, res, load, factor):
     s[SETA] = res if math.isnan(e) else e + (res - e) * factor
 
 
-@njit
+@njit_nort
 def _add_swing_sample(s, prm, t, x):
     """``classify.add_swing_sample``."""
     sigma = prm[P_SIG]
@@ -379,7 +379,7 @@ def _add_swing_sample(s, prm, t, x):
 
 
 # ---------------------------------------------------------------- tests
-@njit
+@njit_nort
 def _cusum2(a, ip, ineg, z, kappa):
     """Two-sided CUSUM step on ``a[ip]`` / ``a[ineg]`` (allowance ``kappa``, both clipped
     at 0); returns the larger of the two statistics."""
@@ -390,14 +390,14 @@ def _cusum2(a, ip, ineg, z, kappa):
     return max(a[ip], a[ineg])
 
 
-@njit
+@njit_nort
 def _is_comp(s):
     """``residual_tests.compensated``."""
     k = s[KIND]
     return s[FLAG] != 0.0 and (k == K_OFFSET or k == K_DRIFT) and s[SRC] == SRC_SWING
 
 
-@njit
+@njit_nort
 def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, infoless):
     """``Detector._sensor_tests``: the alarm source code of one sensor."""
     if not math.isfinite(xi):
@@ -463,7 +463,7 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
     return alarm
 
 
-@njit
+@njit_nort
 def _foot_total(ss, gs, prm, f, x, v, tot_f, weight, alarms, corr, tmp, part):
     """``Detector._foot_total`` of foot ``f`` (gate open)."""
     for j in range(4):
@@ -539,7 +539,7 @@ def _foot_total(ss, gs, prm, f, x, v, tot_f, weight, alarms, corr, tmp, part):
 
 
 # ---------------------------------------------------------------- flag machine
-@njit
+@njit_nort
 def _prio(src):
     if src == SRC_NAN:
         return 4
@@ -552,7 +552,7 @@ def _prio(src):
     return 0
 
 
-@njit
+@njit_nort
 def _apply_alarm(s, a, t, x):
     """``Detector._apply_alarm``."""
     if s[FLAG] == 0.0:
@@ -572,7 +572,7 @@ def _apply_alarm(s, a, t, x):
     s[LA] = t
 
 
-@njit
+@njit_nort
 def _maybe_clear(s, prm, t, x, loaded):
     """``classify.maybe_clear``."""
     last = s[LA]
@@ -597,7 +597,7 @@ def _maybe_clear(s, prm, t, x, loaded):
         s[SWP] = s[SWN] = s[CP] = s[CN] = 0.0
 
 
-@njit
+@njit_nort
 def _classify(s, prm, t, x):
     """``classify.classify`` of a flagged sensor."""
     src = s[SRC]
@@ -655,7 +655,7 @@ def _classify(s, prm, t, x):
 
 
 # ---------------------------------------------------------------- recovery
-@njit
+@njit_nort
 def _corrected(ss, prm, x, corrected, info, tmp):
     """``Recovery._corrected``: per sensor the corrected reading [N] and whether the
     reading carries information (1/0)."""
@@ -703,7 +703,7 @@ def _corrected(ss, prm, x, corrected, info, tmp):
             info[i] = 1.0
 
 
-@njit
+@njit_nort
 def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
     """``Recovery.step``: ``rec`` and ``eta`` of every sensor."""
     _corrected(ss, prm, x, corrected, info, tmp)
@@ -773,7 +773,7 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
 
 
 # ---------------------------------------------------------------- one sample
-@njit
+@njit_nort
 def detect_step(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, ws):
     """Detector (``Detector.step``) and recovery (``Recovery.step``) on one sample.
 
@@ -850,7 +850,7 @@ def detect_run(ss, gs, prm, t, x, v, tot, cref, cest, gap, rec, eta, flag, kind)
             kind[k, i] = int(ss[i, KIND])
 
 
-@njit
+@njit_nort
 def time_guard_step(gs, t, dt, gap_limit):
     """``TimeGuard.step``: ``(clock, state code, jump)``."""
     last = gs[G_STAMP]
@@ -880,7 +880,7 @@ def time_guard_step(gs, t, dt, gap_limit):
     return c, st, jp
 
 
-@njit
+@njit_nort
 def time_guard_run(t, dt, gap_limit, gs, clock, state, jump):
     """``TimeGuard.step`` over every stamp of ``t`` (state kept in ``gs``): the monotone
     clock, the state code (:data:`ST_OK` ...) and the step from the last finite stamp."""

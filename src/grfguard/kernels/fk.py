@@ -201,7 +201,7 @@ def _mv(m0, m1, m2, m3, m4, m5, m6, m7, m8, v0, v1, v2):
 # mj_local2Global (sameframe: 0 none, 1 body, 2 inertia, 3 body rotation, 4 inertia
 # rotation) is written out in _inertial_frames and fk_sites: a call per body with a
 # dozen array arguments costs more than the arithmetic.
-@njit_nort
+@njit_nort(inline="always")
 def _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat):
     """``xipos``/``ximat`` of bodies 1.. from their inertial frames (sameframe 2 / 4, the
     inertial frame relative to itself, leaves them as they are)."""
@@ -229,7 +229,7 @@ def _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, x
                 ximat[i, k] = xmat[i, k]
 
 
-@njit_nort
+@njit_nort(inline="always")
 def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
             body_quat, body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis,
             jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat, subtree_com,
@@ -311,7 +311,7 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
     """Copy ``qpos_in`` into ``qpos`` and normalise its free/ball quaternions."""
     for k in range(qpos.shape[0]):
@@ -327,7 +327,7 @@ def _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr):
             qpos[a + 3] = q3
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _world_frame(xpos, xquat, xmat, xipos, ximat):
     """Body 0 (the world): zero position, identity orientation."""
     for k in range(3):
@@ -347,7 +347,7 @@ def _world_frame(xpos, xquat, xmat, xipos, ximat):
     ximat[0, 8] = 1.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
     """mj_comPos: backward pass for the subtree CoMs [m] (MuJoCo 4 puts every body's own
     m x_i in first, then adds the children: same order here)."""
@@ -371,7 +371,7 @@ def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
                 subtree_com[i, k] = subtree_com[i, k] * inv
 
 
-@njit_nort
+@njit_nort(inline="always")
 def fk_sites(sites, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
              ximat, site_xpos, site_xmat, work):
     """World pose of the chosen ``sites`` (k,) into ``site_xpos (k, 3)``, ``site_xmat (k, 9)``

@@ -43,7 +43,7 @@ import pandas as pd
 from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
 from grfguard.io.codes import codes_to_str, strings_to_str
 from grfguard.io.schema import CONTACT_REF, FORCE_COLUMNS, IMU_QUAT, TIME, ZMP_REF
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import njit_nort
 from grfguard.kernels.detect import (
     FLAG,
     G_PREV_INVALID,
@@ -133,7 +133,7 @@ def output_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]
     return (*OUT_COLUMNS, *det) if with_vfs else det
 
 
-@njit
+@njit_nort
 def _input_guard(xin, xc, mp, lims):
     """``InputGuard.clean_row``: ``xc`` = ``xin`` with implausible values NaN; True when
     something was rejected."""
@@ -156,7 +156,7 @@ def _input_guard(xin, xc, mp, lims):
     return rejected
 
 
-@njit
+@njit_nort
 def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
     """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break,
     or the row's precomputed columns); returns ``valid`` (``Monitor._valid``)."""
@@ -187,7 +187,7 @@ def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viw
     return (flag == 1.0) if math.isfinite(flag) else fin
 
 
-@njit
+@njit_nort
 def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     """``Monitor._prepare``: range check of the virtual forces, ``Continuity.after``,
     unusable virtual outputs set to NaN; returns ``(bounded, state code)``."""
@@ -224,7 +224,7 @@ def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     return bounded, ST_OK
 
 
-@njit
+@njit_nort
 def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
     """``Monitor._finish``: an implausible reading's flag reported as ``spikes``, the
     recovered force within the plausible range; writes the detector columns."""
@@ -247,7 +247,7 @@ def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
         yout[o + 24 + i] = r
 
 
-@njit
+@njit_nort
 def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
                  xc, vy, ws, sy):
     """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`).
@@ -309,7 +309,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     ex[3] = 1.0 if bounded else 0.0
 
 
-@njit
+@njit_nort
 def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
                 ws, sy):
     """:func:`monitor_step` over every row of ``X`` into ``Y`` and ``EX`` (the batch path)."""
@@ -498,7 +498,7 @@ _NF = len(MonitorKernel._F_PARTS)
 _HI = 2 * _NF  # header: (offset, size) per float part, n_in, (offset, size) per int part
 
 
-@njit
+@njit_nort
 def _unpack(F, I):
     n_in = I[_HI]
     ex = F[I[0]:I[0] + I[1]]
@@ -523,7 +523,7 @@ def _unpack(F, I):
     return ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy
 
 
-@njit
+@njit_nort
 def monitor_step_packed(x, y, F, I):
     """:func:`monitor_step` with every array in the two buffers of
     :class:`MonitorKernel` (``F`` floats, ``I`` ints with the layout header)."""
@@ -532,7 +532,7 @@ def monitor_step_packed(x, y, F, I):
                  ws, sy)
 
 
-@njit
+@njit_nort
 def monitor_run_packed(X, Y, EX, F, I):
     """:func:`monitor_step_packed` over every row of ``X`` (the batch path)."""
     ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
@@ -641,7 +641,7 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     n = len(log)
     cols = list(k.in_cols)
     src = [(_column(log, c) if c in log.columns else None) for c in cols]
-    Y = np.empty((n, len(k.out_cols)))
+    Y = np.empty((n, len(k.out_cols)), order="F")  # columns contiguous: no copy each
     EX = np.empty((n, N_EX))
     X = np.empty((min(chunk, n), len(cols)))
     for a in range(0, n, chunk):
@@ -656,15 +656,15 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     o = 0
     if k.with_vfs:
         for j, c in enumerate(OUT_COLUMNS):
-            new[c] = Y[:, j].copy()
+            new[c] = Y[:, j]
         o = _NV
     kinds = Y[:, o + 8:o + 16].astype(np.int64)
     for i in range(8):
         new[_FLAG_COLS[i]] = Y[:, o + i] != 0.0
         new[_KIND_COLS[i]] = codes_to_str(kinds[:, i], KIND_NAMES)
     for i in range(8):
-        new[_REC_COLS[i]] = Y[:, o + 24 + i].copy()
-        new[_ETA_COLS[i]] = Y[:, o + 16 + i].copy()
+        new[_REC_COLS[i]] = Y[:, o + 24 + i]
+        new[_ETA_COLS[i]] = Y[:, o + 16 + i]
     if k.with_system:
         new["model_mismatch"] = Y[:, o + 33] != 0.0
         new["model_mismatch_reason"] = _mismatch_reasons(Y[:, o + 33:], k.vib_config)
@@ -674,18 +674,20 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     return _with_columns(log, new)
 
 
-def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> np.ndarray:
+def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> Any:
     """``model_mismatch_reason`` of every row of the system columns ``S`` (one text per
-    distinct row)."""
-    out = np.full(S.shape[0], "", dtype=object)
-    memo: dict[bytes, str] = {}
+    distinct row, the column built from codes: no string object per row)."""
+    idx = np.zeros(S.shape[0], dtype=np.int64)
+    names = [""]
+    memo: dict[bytes, int] = {}
     for r in np.flatnonzero(S[:, 0] != 0.0):
         key = S[r].tobytes()
-        txt = memo.get(key)
-        if txt is None:
-            txt = memo[key] = reason_text(S[r].tolist(), vib_config)
-        out[r] = txt
-    return out
+        j = memo.get(key)
+        if j is None:
+            j = memo[key] = len(names)
+            names.append(reason_text(S[r].tolist(), vib_config))
+        idx[r] = j
+    return codes_to_str(idx, names)
 
 
 def _reasons(mon: Any, log: pd.DataFrame, codes: np.ndarray, t_raw: np.ndarray,

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from grfguard.kernels._jit import njit
+from grfguard.kernels._jit import njit_nort
 
 __all__ = ["N_SD", "N_SP", "standing_params", "standing_reset", "standing_step"]
 
@@ -55,7 +55,7 @@ def standing_params(stage, dt_s: float) -> np.ndarray:
     return p
 
 
-@njit
+@njit_nort
 def _det_reset(sd):
     """``StandingDetector.reset``."""
     for k in range(_DS, _T + 1):
@@ -76,7 +76,7 @@ def _det_reset(sd):
         sd[_TOT_BASE + f] = 0.0
 
 
-@njit
+@njit_nort
 def standing_reset(sd):
     """``StandingStage.reset``."""
     _det_reset(sd)
@@ -94,7 +94,7 @@ def standing_reset(sd):
         sd[_LIFTED + f] = 0.0
 
 
-@njit
+@njit_nort
 def _shifted(sd, sp, tot):
     """``StandingDetector._shifted``."""
     if not (math.isfinite(tot[0]) and math.isfinite(tot[1])):
@@ -110,7 +110,20 @@ def _shifted(sd, sp, tot):
     return max(abs(tot[0] - sd[_TOT_BASE]), abs(tot[1] - sd[_TOT_BASE + 1])) > lim
 
 
-@njit
+@njit_nort
+def _sort8(a):
+    """Sort ``a`` (8,) in place: insertion sort (numba's ``sort`` needs its runtime, which
+    these per-sample kernels do without; same values)."""
+    for i in range(1, 8):
+        key = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > key:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = key
+
+
+@njit_nort
 def _det_update(sd, sp, x, v, ds, tot):
     """``StandingDetector.update`` (flags, kinds, eta in ``sd``)."""
     dt = sp[_S_DT]
@@ -163,7 +176,7 @@ def _det_update(sd, sp, x, v, ds, tot):
         dev_s[i] = lp - sd[_BASE + i] if math.isfinite(lp) else 0.0
         dev[i] = abs(dev_s[i])
         srt[i] = dev[i]
-    srt.sort()
+    _sort8(srt)
     o3, o4 = srt[3], srt[4]
     t = sd[_T]
     for i in range(8):
@@ -193,13 +206,13 @@ def _det_update(sd, sp, x, v, ds, tot):
         sd[_ETA + i] = dev_s[i] if sd[_FLAGS + i] != 0.0 else 0.0
 
 
-@njit
+@njit_nort
 def _contact(cref, cest):
     c = cref if math.isfinite(cref) else cest
     return math.isfinite(c) and c > 0.5
 
 
-@njit
+@njit_nort
 def _held(sd, sp, i, xi, vi):
     """``StandingStage._held``: kind code and eta [N] of a held sensor (offset or gain,
     whichever explains the reading better)."""
@@ -219,7 +232,7 @@ def _held(sd, sp, i, xi, vi):
     return sd[_HELD_KIND + i], eta
 
 
-@njit
+@njit_nort
 def standing_step(sd, sp, x, v, tot, cref, cest, oflag, okind, oeta, orec):
     """``StandingStage.step``: edits the output flag/kind code/eta/recovered (8,) of the
     detector and recovery in place."""

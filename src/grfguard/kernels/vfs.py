@@ -6,16 +6,15 @@ angular momentum, the Butterworth low-passes (direct form II transposed, as
 ``scipy.signal.lfilter``), Newton-Euler ZMP, kinematic corner contact, the
 sole-compliance prior and the corner QP (:mod:`grfguard.kernels.nnls`), the per-foot
 totals and CoPs. :func:`vfs_run` loops the same step over a log in one compiled call, so
-streaming and batch are identical by construction. Both reproduce
-:class:`grfguard.estimate.vfs.VirtualForceSensor` (``update`` / ``run``) in the same
-operation order; the only differences are the rounding of the corner QP (the reference
-uses ``scipy.optimize.nnls``; tests and BENCHMARKS.md give the measured size).
+streaming and batch are identical by construction. Both are what
+:class:`grfguard.estimate.vfs.VirtualForceSensor` (``update`` / ``run``) runs; the numpy
+stages they reproduce in the same operation order are ``tests/reference/vfs_stages.py``.
 
-Supported settings: the default estimator (``com_method="multibody"``,
-``split_method="qp"`` with the compliance prior ``contact_stiffness_per_kg > 0``,
-``zmp_filter="direct"``, ``anchor_attitude_time_constant = 0``), with or without the
-accelerometer, gyro, planned contact, angular momentum, kinematic contact.
-:meth:`VFSKernel.supports` says whether a :class:`VFSConfig` is covered.
+Settings: every :class:`VFSConfig`. The non-default stages (the paper's CoM filter and
+split, the pendulum Kalman ZMP, the anchor attitude) are in
+:mod:`grfguard.kernels.vfs_paper`, called from the hooks marked ``vfs_paper`` in
+``_step``; the rigid QP (``contact_stiffness_per_kg = 0``) is the compliance QP with a
+uniform prior.
 
 Array layouts (one row per sample):
 
@@ -238,7 +237,7 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
     return True
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _valid_sample(x, y, state, prm):
     """Whether row ``x`` is usable (finite joints, attitude and the optional gyro, acc and
     contact reference; non-zero quaternion). If not, ``y`` repeats the last output (NaN
@@ -344,7 +343,7 @@ def _scratch_views(ws, nq, nb):
             qp_dots, view1d(ws, o, ws.shape[0] - o))
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _attitude_filter(x, state, prm):
     """Complementary attitude filter (gyro prediction pulled towards the measured
     quaternion by ``katt``); returns and stores the unit attitude (w, x, y, z)."""
@@ -376,7 +375,7 @@ def _attitude_filter(x, state, prm):
     return aw, ax, ay, az
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, xpos, xquat,
                 xmat, xipos, ximat, stc, msub, sxp, sxm, qin, pk, work, sel):
     """Forward kinematics with the trunk at the origin: bodies, IMU/corner/sole sites,
@@ -422,7 +421,7 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     return stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _stance(x, prm, pk):
     """Stance of the right and left foot: the contact reference if logged, else the
     foot whose lowest corner is within 1 cm of the lowest corner of both."""
@@ -438,7 +437,7 @@ def _stance(x, prm, pk):
     return st0, st1
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
     """Leg odometry (no anchor attitude: the rotation correction is the identity):
     the trunk position in the world (3 floats) [m] and the ground height [m]; the anchor
@@ -491,7 +490,7 @@ def _init_anchor(state, pk, sxp, st0, st1):
     state[_S_ANCHOR] = anc
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
     """Second differences over the last three samples of the IMU-relative CoM
     (``raw[0:3]``) and the IMU's world position (``raw[6:9]``) [m/s^2]; ``raw`` zeroed."""
@@ -519,7 +518,7 @@ def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
                 raw[off + k] = (v1 - v0) / dt
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
                    order, dt):
     """Rate of the angular momentum about the CoM (``raw[3:6]``) [N m] from this and the
@@ -552,7 +551,7 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
     state[_S_PREVF] = 1.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nbr, dt):
     """Angular momentum about the CoM ``cc`` (3 floats) [N m s]: the bodies' linear
     momenta (finite differences of their CoMs ``pb`` -> ``xipos``) plus their spin
@@ -609,7 +608,7 @@ def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nb
     return lin[0] + L0, lin[1] + L1, lin[2] + L2
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v3d, aw, ax,
              ay, az, order, g):
     """Low-pass the raw rates and (if used) fuse the accelerometer; returns the total
@@ -646,7 +645,7 @@ def _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v
     return mass * (cdd0 + 0.0), mass * (cdd1 + 0.0), mass * (cdd2 + g), ld0, ld1
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _world_acc(out, x, aw, ax, ay, az, g):
     """acc_W = R(q_att) acc - g e_z [m/s^2] (R from the normalised attitude, numpy's
     formula) into ``out``."""
@@ -668,7 +667,7 @@ def _world_acc(out, x, aw, ax, ay, az, g):
     out[2] = ((r20 * a0 + r22 * a2) + r21 * a1) - g
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
     """Move the corners ``pk`` to the world, ``tmp8`` = their height above ground [m];
     ``ctc`` (0/1) = corners in contact (the stance foot's corners, or with the kinematic
@@ -753,7 +752,7 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
             forces[cidx[c]] = qp_x[c]
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1):
     """Write the output row ``y`` (:data:`OUT_COLUMNS`) and keep it in ``state``."""
     for k in range(8):

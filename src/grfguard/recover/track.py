@@ -11,8 +11,9 @@ force and force rate:
   exactly zero);
 - process: white force acceleration of power spectral density ``q = (acc_psd · m g)²``
   [N²/s³] with ``acc_psd = 10 /s^1.5`` (so it scales with the robot's weight; set on
-  simulated SURALP and G1 walks: any value from 3 to 100 keeps G1's offset recovery
-  below 0.5 % of the weight at 1 kHz, 10 is the best of that range on both robots).
+  simulated walks of two shipped corner-cell robots, 33 kg and 114 kg: any value from 3
+  to 100 keeps the 33 kg robot's offset recovery below 0.5 % of the weight at 1 kHz, 10
+  is the best of that range on both).
 
 It has no lag on a force that changes at a constant rate (a type-2 tracker: zero
 steady-state error on a ramp), and it reduces white noise by about 1.6x at 1 kHz
@@ -24,8 +25,8 @@ It only replaces the recovered force where a sensor is flagged with a kind whose
 recovery comes from the reading (offset, drift, gain): healthy sensors stay the
 measurement, and reconstructions without a reading (frozen, dropout, ...) stay the
 whole-body balance. :func:`grfguard.estimate.described.run_described` applies it to the
-corner cells of described robots (G1); the default SURALP monitor does not (its outputs
-are unchanged; call :func:`track_recovered` on its output to get the same).
+corner cells of described robots (G1); :class:`~grfguard.pipeline.Monitor` alone does not
+(its outputs are unchanged; call :func:`track_recovered` on its output to get the same).
 
 Example:
     >>> out = track_recovered(monitor_output, weight_n=327.0, noise_n=2.0)

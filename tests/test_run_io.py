@@ -1,0 +1,118 @@
+"""``grfguard run``'s I/O (issue 11): the zero-copy Parquet read, the Parquet options of
+written logs, the kind/state columns built from integer codes, and the command's output
+against the pure-Python monitor on a log with bad samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from grfguard.cli import run_log
+from grfguard.detect.monitor import Monitor
+from grfguard.faults import inject_faults, parse_fault_spec
+from grfguard.guard import SYSTEM_STATES
+from grfguard.io.codes import codes_to_categorical, codes_to_str, strings_to_str
+from grfguard.io.logio import read_log, write_log
+from grfguard.kernels.detect import KIND_NAMES
+from grfguard.model.robot import SURALP
+from grfguard.sim import GaitConfig, NoiseConfig, simulate
+
+pytestmark = pytest.mark.filterwarnings("ignore::grfguard.errors.GrfguardWarning")  # the gap
+
+
+@pytest.fixture(scope="module")
+def bad_walk(tmp_path_factory) -> tuple:
+    """A 5 s walk with faults (frozen, offset, dropout, spikes), IMU samples missing, a
+    gap of 40 ms and a repeated time stamp dropped: every text column has non-trivial
+    values."""
+    log = simulate(SURALP, GaitConfig(duration=5.0), NoiseConfig(), seed=11)
+    specs = ["r1=frozen:0@1", "r2=offset:100@1.5", "l4=dropout@2-2.3", "l1=spikes:400@3"]
+    log = inject_faults(log, [parse_fault_spec(s) for s in specs], seed=1)
+    log = log.drop(index=range(3000, 3040)).reset_index(drop=True)  # a time gap
+    log.loc[1200:1205, ["imu_acc_x", "imu_gyro_y"]] = np.nan  # estimator inputs missing
+    path = tmp_path_factory.mktemp("runio") / "bad.parquet"
+    write_log(log, path)
+    return path, log
+
+
+def test_codes_to_str_equals_python_strings() -> None:
+    rng = np.random.default_rng(0)
+    codes = rng.integers(0, len(KIND_NAMES), 5000)
+    ref = pd.Series(np.array(KIND_NAMES, dtype=object)[codes])  # the previous construction
+    got = pd.Series(codes_to_str(codes, KIND_NAMES))
+    pd.testing.assert_series_equal(got, ref)
+    got_f = pd.Series(codes_to_str(codes.astype(float), KIND_NAMES))  # kernel outputs
+    pd.testing.assert_series_equal(got_f, ref)
+    cat = codes_to_categorical(codes, KIND_NAMES)
+    assert list(cat.categories) == list(KIND_NAMES)
+    assert np.array_equal(cat.codes, codes)
+    assert pd.Series(strings_to_str(ref.to_numpy(dtype=object))).equals(ref)
+    with pytest.raises(IndexError):
+        codes_to_str(np.array([0, len(SYSTEM_STATES)]), SYSTEM_STATES)
+    with pytest.raises(IndexError):
+        codes_to_str(np.array([-1]), SYSTEM_STATES)
+
+
+def test_zero_copy_read_equals_the_copying_read(bad_walk) -> None:
+    path, _ = bad_walk
+    ref = read_log(path)
+    fast = read_log(path, copy=False)
+    pd.testing.assert_frame_equal(fast, ref, check_exact=True)
+    assert fast.attrs == ref.attrs
+    ref.loc[0, "force_r1"] = 1.0  # the default read is an ordinary writable frame
+    with pytest.raises(ValueError, match="read-only"):  # views of the Arrow buffers
+        fast.loc[0, "force_r1"] = 1.0
+    assert ref["force_l4"].isna().any()  # the dropout: nulls converted the same way
+    with pytest.raises(Exception, match="requested column"):
+        read_log(path, columns=["force_r1", "no_such_column"])
+    assert list(read_log(path, columns=["force_r1"]).columns) == ["time", "force_r1"]
+
+
+def test_written_logs_round_trip_with_split_floats(tmp_path) -> None:
+    n = 1000
+    df = pd.DataFrame({
+        "time": np.arange(n) * 1e-3,
+        "x": np.where(np.arange(n) % 7 == 0, np.nan, np.sin(np.arange(n))),
+        "k": np.arange(n) % 3,
+        "b": np.arange(n) % 2 == 0,
+        "s": np.array(["a", "bb", ""], dtype=object)[np.arange(n) % 3],
+        "f32": np.linspace(0, 1, n, dtype=np.float32),
+    })
+    df.attrs = {"robot": None, "note": "x"}
+    p = write_log(df, tmp_path / "rt.parquet")
+    back = read_log(p)
+    pd.testing.assert_frame_equal(back, df, check_exact=True)
+    meta = pq.ParquetFile(p).metadata.row_group(0)
+    enc = {meta.column(i).path_in_schema: meta.column(i).encodings
+           for i in range(meta.num_columns)}
+    assert "BYTE_STREAM_SPLIT" in enc["x"] and "BYTE_STREAM_SPLIT" in enc["f32"]
+    assert "RLE_DICTIONARY" in enc["s"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert meta.column(0).compression == "ZSTD"
+
+
+def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
+    path, _ = bad_walk
+    out = tmp_path / "out.parquet"
+    marks: list[str] = []
+    n = run_log(path, out, phase=marks.append)
+    assert marks == ["read", "checks", "monitor_setup", "monitor_run", "write"]
+    got = read_log(out)
+    assert n == len(got)
+    log = read_log(path)
+    ref = Monitor.for_log(log, compiled=False).run(log)  # the reference stages
+    assert list(got.columns) == list(ref.columns)
+    text = [c for c in ref.columns if c.startswith("kind_")] + ["system_state",
+                                                                "system_reason"]
+    for c in ref.columns:
+        assert got[c].dtype == ref[c].dtype, c
+        if c in text or ref[c].dtype == bool or c in log.columns:
+            assert got[c].equals(ref[c]), c
+        else:
+            np.testing.assert_allclose(got[c].to_numpy(float), ref[c].to_numpy(float),
+                                       atol=1e-6, rtol=0, err_msg=c)
+    states = set(got["system_state"])
+    assert {"ok", "time_gap", "input_invalid"} <= states, states
+    assert (got["system_reason"] != "").sum() > 5
+    assert {"frozen", "offset"} <= set(got["kind_r1"]) | set(got["kind_r2"])
