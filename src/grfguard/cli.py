@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.table import Table
 
 from grfguard._cliutil import ROBOT_HELP
 from grfguard._term import cli_friendly as _friendly
@@ -400,6 +399,8 @@ def _print_evaluation(result: dict[str, Any]) -> None:
     for section, data in result.items():
         if not isinstance(data, dict):
             continue
+        from rich.table import Table  # lazy: only `evaluate` prints tables
+
         table = Table(title=section)
         table.add_column("metric")
         table.add_column("value")

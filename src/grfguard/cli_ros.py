@@ -18,13 +18,15 @@ console = Console(stderr=True)
 
 def _show_bag_warnings() -> None:
     """Print bag-import warnings as one yellow line each (not Python's warning format)."""
-    from grfguard.io.rosbag import BagImportWarning
+    import sys
 
     previous = warnings.showwarning
 
     def show(message: Any, category: Any, filename: str, lineno: int, file: Any = None,
              line: Any = None) -> None:
-        if isinstance(category, type) and issubclass(category, BagImportWarning):
+        rosbag = sys.modules.get("grfguard.io.rosbag")  # not imported: not a bag warning
+        if (rosbag is not None and isinstance(category, type)
+                and issubclass(category, rosbag.BagImportWarning)):
             console.print(f"[bold yellow]warning:[/] {message}", highlight=False,
                           soft_wrap=True)
         else:
