@@ -39,8 +39,8 @@ from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = ["StandEnd", "StandingConfig", "StandingDetector", "StandingStage"]
 
-# The schema's corner cells ``r1..r4, l1..l4``: four load cells per sole (the issue's
-# corner-cell option; SURALP, G1). This layer works on them by design; robots with ankle
+# The schema's corner cells ``r1..r4, l1..l4``: four load cells per sole (the corner-cell
+# sensing of a robot TOML). This layer works on them by design; robots with ankle
 # force/torque sensors go through ``detect/channels.py``, which takes any channel list.
 _N = len(SENSOR_NAMES)
 _MID = _N // 2 - 1  # with one sensor left out, the median of the others is order[_MID(+1)]
