@@ -1,8 +1,8 @@
 """Reality gap WITHOUT calibration (issue 10, must-show 1 and 4).
 
 For the exact model, each shipped gap alone (``grfguard/data/reality/``) and all of them
-together, with ``Monitor.for_log(log, common_mode=...)`` and the default thresholds (no
-``grfguard calibrate``):
+together, with the default monitor ``Monitor.for_log(log)`` (its system layer on, compiled;
+``--off``: ``common_mode=False``) and the default thresholds (no ``grfguard calibrate``):
 
 - a fault-free walk (``--duration`` s, seed 1): healthy sensors flagged (count, first flag
   time, share of the walk flagged), ``model_mismatch`` (share of the walk, last reason);
@@ -53,13 +53,19 @@ def _walk(name: str, duration: float, seed: int):
                     reality=_gap(name))
 
 
-def fault_free(name: str, duration: float, common_mode: bool) -> dict:
+def _monitor(log, common_mode: bool):
+    """The default monitor (its system layer on), or with ``common_mode=False``."""
     from grfguard.detect import Monitor
+
+    return Monitor.for_log(log) if common_mode else Monitor.for_log(log, common_mode=False)
+
+
+def fault_free(name: str, duration: float, common_mode: bool) -> dict:
     from grfguard.model.robot import SENSOR_NAMES
 
     log = _walk(name, duration, 1)
     t0 = time.perf_counter()
-    out = Monitor.for_log(log, common_mode=common_mode).run(log)
+    out = _monitor(log, common_mode).run(log)
     run_s = time.perf_counter() - t0
     t = out["time"].to_numpy()
     flagged = []
@@ -75,13 +81,12 @@ def fault_free(name: str, duration: float, common_mode: bool) -> dict:
 
 def scenario(name: str, duration: float, common_mode: bool) -> dict:
     from grfguard.demo import PAPER_FAULTS
-    from grfguard.detect import Monitor
     from grfguard.evaluate.detection import evaluate_detection
     from grfguard.faults import inject_faults, parse_fault_spec
 
     walk = _walk(name, duration, 0)
     faulty = inject_faults(walk, [parse_fault_spec(s) for s in PAPER_FAULTS], seed=0)
-    out = Monitor.for_log(faulty, common_mode=common_mode).run(faulty)
+    out = _monitor(faulty, common_mode).run(faulty)
     det = evaluate_detection(faulty, out)
     t = faulty["time"].to_numpy()
     res = {}
@@ -99,7 +104,6 @@ def scenario(name: str, duration: float, common_mode: bool) -> dict:
 
 
 def ladder(name: str, common_mode: bool) -> dict:
-    from grfguard.detect import Monitor
     from grfguard.evaluate.detection import evaluate_detection
     from grfguard.faults import inject_faults, parse_fault_spec
 
@@ -109,7 +113,7 @@ def ladder(name: str, common_mode: bool) -> dict:
         o, d, g = (LADDER[key][k] for key in ("offset", "drift", "gain"))
         specs = [f"r2=offset:{o:g}@6", f"l3=drift:{d:g}@6", f"r4=gain:{g:g}@6"]
         faulty = inject_faults(walk, [parse_fault_spec(s) for s in specs], seed=0)
-        out = Monitor.for_log(faulty, common_mode=common_mode).run(faulty)
+        out = _monitor(faulty, common_mode).run(faulty)
         det = evaluate_detection(faulty, out)
         for key, s, size in (("offset", "r2", o), ("drift", "l3", d), ("gain", "r4", g)):
             dl = det.loc[s, "delay_s"]
@@ -185,7 +189,9 @@ def main() -> None:
         f"`python benchmarks/bench_reality_nocal.py --duration {args.duration:g} "
         f"--scenario-duration {args.scenario_duration:g} --jobs {args.jobs}"
         f"{' --off' if args.off else ''}{' --ladder' if args.ladder else ''} --write` "
-        f"(`Monitor.for_log(log, common_mode={cm})`, default thresholds, no calibration; "
+        f"(`Monitor.for_log(log{'' if cm else ', common_mode=False'})`, the default "
+        f"monitor{'' if cm else ' without its system layer'}, compiled; default "
+        "thresholds, no calibration; "
         f"gap files in `grfguard/data/reality/`). Fault-free: a {args.duration:g} s walk, "
         "seed 1: healthy sensors flagged (share of the walk flagged), share of the walk with "
         "`model_mismatch` and its last reason. Paper scenario (r1 frozen at 0 / r2 +100 N / "

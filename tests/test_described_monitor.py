@@ -134,3 +134,19 @@ def test_cli_calibrate_then_run_on_g1_logs(tmp_path, g1) -> None:
     tab = evaluate_detection(read_log(tmp_path / "out.parquet"))
     assert tab.loc["r3", "detected"] and tab.loc["r3", "kind_estimated"] == "offset"
     assert tab["false_alarms"].sum() == 0
+
+
+def test_tracking_without_a_robot_name_weighs_by_the_virtual_feet(g1, g1_vfs) -> None:
+    """A corner log with precomputed virtual-sensor columns but no robot name is still
+    tracked: the weight is the mean virtual vertical force (within 2 % of m g)."""
+    from grfguard.estimate.described import _weight_n
+
+    anon = g1_vfs.copy()
+    anon.attrs = {k: v for k, v in g1_vfs.attrs.items() if k != "robot_name"}
+    assert abs(_weight_n(anon, None) - _weight(g1)) < 0.02 * _weight(g1)
+    faulty = inject_faults(anon, [f"r2=offset:{0.09 * _weight(g1):.2f}@5"], seed=0)
+    out = run_described(faulty, MonitorConfig())
+    late = out["time"].to_numpy() > 6.0
+    err = out["recovered_r2"].to_numpy()[late] - out["true_force_r2"].to_numpy()[late]
+    assert out["flag_r2"].to_numpy()[late].all()
+    assert np.sqrt(np.mean(err**2)) <= 0.005 * _weight(g1)

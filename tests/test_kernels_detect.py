@@ -160,6 +160,8 @@ def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: 
         b = batch[k]
         assert list(o) == [c for c in out.columns if c in o]  # the batch's column order
         for j, c in enumerate(cols):
+            if c.startswith("mm_"):  # the numbers of model_mismatch_reason (array call)
+                continue
             if c.startswith("kind_"):
                 assert KIND_NAMES[int(y[j])] == o[c] == b[c]
             elif c == "system_state":
@@ -180,7 +182,8 @@ def test_uncompiled_features_fall_back(walk: pd.DataFrame) -> None:
         assert mon.compiled_reason()
         y = mon.update_array(np.full(len(mon.input_columns), np.nan))
         assert y.shape == (len(mon.output_columns),)
-        assert np.isfinite(y[-9:-1]).all()  # recovered forces never NaN
+        j = mon.output_columns.index("recovered_r1")
+        assert np.isfinite(y[j:j + 8]).all()  # recovered forces never NaN
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ def gyro_walk() -> pd.DataFrame:
 
 
 def test_gyro_bias_is_learned_at_rest_and_blamed_on_the_model(gyro_walk) -> None:
-    plain = Monitor.for_log(gyro_walk).run(gyro_walk)
+    plain = Monitor.for_log(gyro_walk, common_mode=False).run(gyro_walk)
     assert plain[FLAGS].any().sum() >= 4  # without the option: healthy sensors flagged
     out = Monitor.for_log(gyro_walk, common_mode=True).run(gyro_walk)
     assert not out[FLAGS].any().any()
@@ -47,7 +47,7 @@ def test_gyro_bias_streaming_equals_run(gyro_walk) -> None:
 def test_swing_zeros_clear_both_feet() -> None:
     log = simulate(gait=GaitConfig(duration=6.0), noise=NoiseConfig(), seed=0,
                    reality=load_reality("zeros"))
-    plain = Monitor.for_log(log).run(log)
+    plain = Monitor.for_log(log, common_mode=False).run(log)
     assert plain[["flag_r1", "flag_r2", "flag_l1"]].any().all()
     out = Monitor.for_log(log, common_mode=True).run(log)
     # the swing tests of a foot wait for its zeros (the left foot's first swing at 2.2 s
@@ -75,7 +75,7 @@ def test_learners_ignore_motion_and_faults() -> None:
 def test_imu_mounting_tilt_is_learned_from_the_flat_soles() -> None:
     log = simulate(gait=GaitConfig(duration=6.0), noise=NoiseConfig(), seed=0,
                    reality=load_reality("imu_pitch"))  # 2 deg in pitch
-    plain = Monitor.for_log(log).run(log)
+    plain = Monitor.for_log(log, common_mode=False).run(log)
     assert plain[FLAGS].any().all()  # without the option: every sensor flagged
     out = Monitor.for_log(log, common_mode=True).run(log)
     assert not out[FLAGS].any().any()

@@ -67,7 +67,7 @@ def test_measured_mass_fixes_the_common_scale(gap_walk):
 
 def test_corrections_remove_the_false_alarms(gap_walk, corrections):
     cols = [f"flag_{s}" for s in SENSOR_NAMES]
-    before = Monitor.for_log(gap_walk).run(gap_walk)
+    before = Monitor.for_log(gap_walk, common_mode=False).run(gap_walk)
     assert before[cols].any().sum() >= 2  # the gap alone breaks the nominal model
     fixed = apply_corrections(gap_walk, corrections)
     assert fixed.attrs["robot"]["mass"] == pytest.approx(corrections.mass_kg)

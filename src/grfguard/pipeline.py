@@ -48,6 +48,7 @@ from grfguard.detect.system import (
     GyroBiasLearner,
     ImuTiltLearner,
     SwingZeroLearner,
+    hold_standing_release,
     hold_unarmed_tests,
     quiet_vfs_config,
     swing_load_to_stance,
@@ -215,7 +216,10 @@ class Monitor:
         guard: Settings of the input and time guards.
         robot: Robot description for the physical ranges (default: the VFS's robot, or
             SURALP).
-        common_mode: Settings of the system-level common-mode fit (False: off).
+        common_mode: Settings of the system-level layer (:mod:`grfguard.detect.system`:
+            common-mode fit and ``model_mismatch``, load-cell zero, gyro bias and IMU tilt
+            learners, accelerometer vibration switch; True, the default: default
+            settings (off for the method ``paper``), False: off).
         standing: Settings of the standing layer
             (:class:`~grfguard.detect.standing.StandingStage`: faults that start while
             both feet stand; True: default settings, False: off).
@@ -234,7 +238,7 @@ class Monitor:
         recover_tuning: RecoverTuning | None = None,
         guard: GuardConfig | None = None,
         robot: RobotConfig | None = None,
-        common_mode: CommonModeConfig | bool = False,
+        common_mode: CommonModeConfig | bool = True,
         standing: StandingConfig | bool = True,
         compiled: bool | None = None,
     ) -> None:
@@ -264,6 +268,8 @@ class Monitor:
         self.tilt: ImuTiltLearner | None = None
         self.vibration: AccVibrationDetector | None = None
         self.vfs_quiet: Any = None
+        if common_mode is True and self.config.method != "default":
+            common_mode = False  # the paper's method as published (and its speed)
         if common_mode is not False:
             cm_cfg = common_mode if isinstance(common_mode, CommonModeConfig) else None
             self.common = CommonModeMonitor(robot, self.config.dt_s, cm_cfg)
@@ -279,7 +285,7 @@ class Monitor:
     @classmethod
     def for_log(cls, log: pd.DataFrame, config: MonitorConfig | None = None,
                 guard: GuardConfig | None = None,
-                common_mode: CommonModeConfig | bool = False,
+                common_mode: CommonModeConfig | bool = True,
                 compiled: bool | None = None,
                 standing: StandingConfig | bool = True) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
@@ -533,8 +539,10 @@ class Monitor:
             v = [a + c for a, c in zip(v, corr, strict=True)]
             tot = [tot[0] + math.fsum(corr[:4]), tot[1] + math.fsum(corr[4:])]
         if self.zeros is not None:
-            hold_unarmed_tests(self.detector, [self.zeros.armed(f) for f in range(2)],
-                               self.common.armed)
+            armed = [self.zeros.armed(f) for f in range(2)]
+            hold_unarmed_tests(self.detector, armed, self.common.armed)
+            if self.standing is not None:  # a flag held after a stand waits for armed tests
+                hold_standing_release(self.standing, armed, self.common.armed)
         out = self._step(p.clock, x, v, tot, p.cref, p.cest)
         reasons = [cm.reason] if cm.reason else []
         if self.gyro_bias is not None and any(self._bias_now):

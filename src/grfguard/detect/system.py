@@ -40,7 +40,7 @@ __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
     "SwingZeroLearner", "GyroBiasConfig", "GyroBiasLearner", "ImuTiltLearner",
     "hold_unarmed_tests", "VibrationConfig", "AccVibrationDetector", "swing_load_to_stance",
-    "quiet_vfs_config",
+    "quiet_vfs_config", "hold_standing_release",
 ]
 
 
@@ -456,6 +456,18 @@ def hold_unarmed_tests(detector, zeros_armed: Sequence[bool], stance_armed: bool
                 s.corner_pos = s.corner_neg = 0.0
         if not stance:
             totals.g_pos[f] = totals.g_neg[f] = 0.0
+
+
+def hold_standing_release(stage, zeros_armed: Sequence[bool], stance_armed: bool) -> None:
+    """A flag the standing layer (:class:`~grfguard.detect.standing.StandingStage`) holds
+    after a stand is released once the sensor's foot and then the other foot have swung:
+    the per-sensor tests had their chance. While those tests are held
+    (:func:`hold_unarmed_tests`) they had none: call before each detector step to restart
+    the count of a foot whose tests are not armed."""
+    for f in range(2):
+        if not (bool(zeros_armed[f]) and bool(stance_armed)):
+            for i in range(4 * f, 4 * f + 4):
+                stage._stage[i] = 0
 
 
 def swing_load_to_stance(

@@ -155,16 +155,20 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
         cfg = cfg.with_thresholds(own)
     sensing = df.attrs.get("sensing")
     if sensing == "corners":
-        rob = described_robot(df, robot)
         need = [vfs_col(s) for s in SENSOR_NAMES] + list(VFS_TOTAL_COLUMNS)
+        rob = None
         if not all(c in df.columns for c in need):
+            rob = described_robot(df, robot)
             df = with_described_vfs(df, rob)
         out = Monitor.for_log(df, cfg).run(df)
         if not track:
             return out
         from grfguard.recover.track import track_recovered
 
-        return track_recovered(out, weight_n=rob.mass * _G, sensors=SENSOR_NAMES,
+        weight = _weight_n(df, robot if rob is None else rob)
+        if not weight > 0:  # NaN: no robot and no virtual force to weigh it by
+            return out
+        return track_recovered(out, weight_n=weight, sensors=SENSOR_NAMES,
                                noise_n=cfg.thresholds.sigma_swing_n)
     if sensing == "ft":
         from grfguard.detect.channels import ChannelConfig, ChannelMonitor
@@ -186,6 +190,20 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
     raise LogFormatError(
         f"the monitor does not watch {sensing!r} sensing (robot {name!r}); 'corners' and "
         "'ft' are supported")
+
+
+def _weight_n(df: pd.DataFrame, robot: Any) -> float:
+    """The robot's weight m g [N]; when the log names no robot (it carries precomputed
+    virtual-sensor columns), the mean of the virtual feet's vertical forces."""
+    import numpy as np
+
+    from grfguard.detect.detector import VFS_TOTAL_COLUMNS
+
+    try:
+        return float(described_robot(df, robot).mass) * _G
+    except LogFormatError:
+        tot = sum(df[c].to_numpy(dtype=float) for c in VFS_TOTAL_COLUMNS)
+        return float(np.nanmean(tot))
 
 
 def ft_channel_calibration(frames: list[pd.DataFrame],

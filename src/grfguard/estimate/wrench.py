@@ -234,26 +234,48 @@ def _base_motion(df: pd.DataFrame, robot: LoadedRobot, sig: _Signals, R_WB: np.n
     return v_B, a_B
 
 
-def _ft_readings(robot: LoadedRobot, d: mujoco.MjData, ground_k: np.ndarray,
-                 out_k: np.ndarray) -> None:
-    """Ankle F/T readings (2, 6) of one sample into ``out_k``: the ground wrench applied
-    to each foot body, the internal wrench to its parent read at the sensor frame."""
+def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float
+           ) -> tuple[float, float, float]:
+    """``np.cross`` of two 3-vectors on Python floats (the same three products and
+    differences, so the same bits, without numpy's per-call overhead of ~20 us)."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+def _ft_ids(robot: LoadedRobot) -> tuple[list[int], list[int], list[int], list[int]]:
+    """Foot bodies, sole sites, F/T sites and the feet's root bodies (model ids)."""
     m = robot.model
     feet_b = [m.body(f.body).id for f in robot.description.feet]
-    sites = [m.site(f"{s}_sole").id for s in SIDES]
-    ft_sites = [m.site(f"{s}_ft").id for s in SIDES]
-    d.xfrc_applied[:] = 0.0
+    return (feet_b, [m.site(f"{s}_sole").id for s in SIDES],
+            [m.site(f"{s}_ft").id for s in SIDES], [int(m.body_rootid[b]) for b in feet_b])
+
+
+def _ft_readings(robot: LoadedRobot, d: mujoco.MjData, ground_k: np.ndarray,
+                 out_k: np.ndarray, ids: tuple | None = None) -> None:
+    """Ankle F/T readings (2, 6) of one sample into ``out_k``: the ground wrench applied
+    to each foot body, the internal wrench to its parent read at the sensor frame
+    (``ids``: :func:`_ft_ids`, looked up when None)."""
+    m = robot.model
+    feet_b, sites, ft_sites, roots = ids if ids is not None else _ft_ids(robot)
+    xfrc = d.xfrc_applied
+    xfrc[:] = 0.0
     for i, b in enumerate(feet_b):
-        F, tau = ground_k[i, :3], ground_k[i, 3:]
-        d.xfrc_applied[b, :3] = F
-        d.xfrc_applied[b, 3:] = tau + np.cross(d.site_xpos[sites[i]] - d.xipos[b], F)
+        F = ground_k[i, :3].tolist()
+        tau = ground_k[i, 3:].tolist()
+        ps = d.site_xpos[sites[i]].tolist()
+        pb = d.xipos[b].tolist()
+        c = _cross(ps[0] - pb[0], ps[1] - pb[1], ps[2] - pb[2], F[0], F[1], F[2])
+        xfrc[b, :3] = F
+        xfrc[b, 3:] = (tau[0] + c[0], tau[1] + c[1], tau[2] + c[2])
     mujoco.mj_rnePostConstraint(m, d)
     for i, b in enumerate(feet_b):
-        tq, fo = d.cfrc_int[b, :3], d.cfrc_int[b, 3:]
-        p_site = d.site_xpos[ft_sites[i]]
-        tq_site = tq - np.cross(p_site - d.subtree_com[m.body_rootid[b]], fo)
+        tq = d.cfrc_int[b, :3].tolist()
+        fo = d.cfrc_int[b, 3:].tolist()
+        p_site = d.site_xpos[ft_sites[i]].tolist()
+        sc = d.subtree_com[roots[i]].tolist()
+        c = _cross(p_site[0] - sc[0], p_site[1] - sc[1], p_site[2] - sc[2], fo[0], fo[1], fo[2])
+        tq_site = np.array([tq[0] - c[0], tq[1] - c[1], tq[2] - c[2]])
         R = d.site_xmat[ft_sites[i]].reshape(3, 3)
-        out_k[i, :3] = -(R.T @ fo)
+        out_k[i, :3] = -(R.T @ np.array(fo))
         out_k[i, 3:] = -(R.T @ tq_site)
 
 
@@ -273,6 +295,7 @@ def _inverse_dynamics(robot: LoadedRobot, d: mujoco.MjData, sig: _Signals,
     ft_out = np.zeros((2, n, 6))
     jac = np.zeros((6, m.nv))
     f_rne = np.zeros(m.nv)
+    ids = _ft_ids(robot) if ft else None
     try:
         for k in range(n):
             d.qpos[:3] = 0.0
@@ -293,7 +316,7 @@ def _inverse_dynamics(robot: LoadedRobot, d: mujoco.MjData, sig: _Signals,
             for i in range(2):
                 ground[i, k] = share[i] * alone[i]
             if ft:
-                _ft_readings(robot, d, ground[:, k], ft_out[:, k])
+                _ft_readings(robot, d, ground[:, k], ft_out[:, k], ids)
     finally:
         d.xfrc_applied[:] = 0.0
     return ground, ft_out

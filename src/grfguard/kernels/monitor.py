@@ -283,7 +283,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
                          qiws, v, tot, cest, _O_TOT, _O_CEST, _O_VALID)
     bounded, state = _prepare(gs, prm, clock, st, reset, valid, v, tot, cest)
     if son:
-        sys_pre_detect(sysp, syss, ss, gs, xc[1:9], v, tot, cref, cest)
+        sys_pre_detect(sysp, syss, ss, gs, xc[1:9], v, tot, cref, cest, sd)
     rec = ws[_W_REC:_W_REC + 8]
     eta = ws[_W_ETA:_W_ETA + 8]
     detect_step(ss, gs, prm, clock, xc[1:9], v, tot, cref, cest, st == ST_GAP, rec, eta, ws)

@@ -111,6 +111,19 @@ def _shifted(sd, sp, tot):
 
 
 @njit_nort
+def _sort8(a):
+    """Sort ``a`` (8,) in place: insertion sort (numba's ``sort`` needs its runtime, which
+    these per-sample kernels do without; same values)."""
+    for i in range(1, 8):
+        key = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > key:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = key
+
+
+@njit_nort
 def _det_update(sd, sp, x, v, ds, tot):
     """``StandingDetector.update`` (flags, kinds, eta in ``sd``)."""
     dt = sp[_S_DT]
@@ -163,13 +176,7 @@ def _det_update(sd, sp, x, v, ds, tot):
         dev_s[i] = lp - sd[_BASE + i] if math.isfinite(lp) else 0.0
         dev[i] = abs(dev_s[i])
         srt[i] = dev[i]
-    for i in range(1, 8):  # insertion sort (numba's sort needs the runtime; same values)
-        key = srt[i]
-        j = i - 1
-        while j >= 0 and srt[j] > key:
-            srt[j + 1] = srt[j]
-            j -= 1
-        srt[j + 1] = key
+    _sort8(srt)
     o3, o4 = srt[3], srt[4]
     t = sd[_T]
     for i in range(8):

@@ -16,7 +16,9 @@ Mirrors, on flat arrays and in the same operation order, what
   fooled swing foot's load moved to the stance foot
   (:func:`~grfguard.detect.system.swing_load_to_stance`), the common-mode fit
   (:class:`~grfguard.detect.system.CommonModeMonitor`) corrects the virtual forces and the
-  unarmed tests are held (:func:`~grfguard.detect.system.hold_unarmed_tests`);
+  unarmed tests are held (:func:`~grfguard.detect.system.hold_unarmed_tests`, and with
+  them the release of the standing layer's held flags,
+  :func:`~grfguard.detect.system.hold_standing_release`);
 * after the detector (:func:`sys_output`): ``model_mismatch`` and the numbers of its
   reason (:data:`OUT_COLUMNS`; :func:`reason_text` builds the text).
 
@@ -34,6 +36,7 @@ import numpy as np
 
 from grfguard.kernels._jit import njit, view1d
 from grfguard.kernels.detect import CN, CP, FLAG, G_GNEG, G_GPOS, P_CORSIG, SWN, SWP, _fsum
+from grfguard.kernels.standing import _STAGE as SD_STAGE
 from grfguard.kernels.vfs import _S_ANCHOR, _kinematics, _scratch_views, _unpack, vfs_step
 from grfguard.model.robot import SENSOR_NAMES
 
@@ -623,7 +626,7 @@ def _cm_result(yp, ys, v, ok, phi):
 
 
 @njit
-def sys_pre_detect(yp, ys, ss, gs, x, v, tot, cref, cest):
+def sys_pre_detect(yp, ys, ss, gs, x, v, tot, cref, cest, sd):
     """``Monitor._detect`` with ``common_mode`` up to the detector step: ``x`` (zeros
     removed), ``v`` and ``tot`` (moved and corrected) edited in place, the unarmed tests'
     sums held in ``ss`` / ``gs``."""
@@ -672,6 +675,8 @@ def sys_pre_detect(yp, ys, ss, gs, x, v, tot, cref, cest):
         if not stance:
             gs[G_GPOS + f] = 0.0
             gs[G_GNEG + f] = 0.0
+            for i in range(4 * f, 4 * f + 4):  # hold_standing_release
+                sd[SD_STAGE + i] = 0.0
 
 
 @njit

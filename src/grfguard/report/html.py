@@ -517,6 +517,21 @@ def _summary_html(summary: pd.DataFrame, thresholds: Any) -> str:
     )
 
 
+def _model_status_html(df: pd.DataFrame) -> str:
+    """One line on the system-level status (``model_mismatch``) when the run has it."""
+    if "model_mismatch" not in df.columns or not len(df):
+        return ""
+    mm = df["model_mismatch"].to_numpy(dtype=bool)
+    if not mm.any():
+        return "<p class='note' id='model-status'>Model: consistent with the sensors " \
+            "(no model_mismatch).</p>"
+    reason = ""
+    if "model_mismatch_reason" in df.columns:
+        reason = str(df["model_mismatch_reason"].to_numpy()[np.flatnonzero(mm)[-1]])
+    return (f"<p class='note' id='model-status'>Model: model_mismatch over "
+            f"{100 * mm.mean():.0f} % of the run; last reason: {_html.escape(reason)}</p>")
+
+
 def _value_html(v: Any, depth: int = 0) -> str:
     """Compact HTML of a metadata value: dicts as flowing key/value chips, lists inline."""
     if isinstance(v, dict):
@@ -718,6 +733,7 @@ def build_html_report(
         f"<header><h1>{_html.escape(title)}</h1><p>{_html.escape(subtitle)}</p></header><main>"
         "<h2>Sensors</h2>"
         + _summary_html(summary, df.attrs.get("thresholds"))
+        + _model_status_html(df)
         + "<p class='note'>"
         + ("Metrics from grfguard.evaluate.detection where given, else: " if metrics is not None
            else "")
