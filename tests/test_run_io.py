@@ -107,7 +107,7 @@ def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
                                                                 "system_reason"]
     for c in ref.columns:
         assert got[c].dtype == ref[c].dtype, c
-        if c in text or ref[c].dtype == bool or c in log.columns:
+        if c in text or not pd.api.types.is_float_dtype(ref[c]) or c in log.columns:
             assert got[c].equals(ref[c]), c
         else:
             np.testing.assert_allclose(got[c].to_numpy(float), ref[c].to_numpy(float),
@@ -115,4 +115,5 @@ def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
     states = set(got["system_state"])
     assert {"ok", "time_gap", "input_invalid"} <= states, states
     assert (got["system_reason"] != "").sum() > 5
-    assert {"frozen", "offset"} <= set(got["kind_r1"]) | set(got["kind_r2"])
+    kinds = set().union(*(set(got[c]) for c in got.columns if c.startswith("kind_")))
+    assert "frozen" in kinds and len(kinds - {"none"}) >= 2, kinds  # several names
