@@ -125,6 +125,11 @@ def main() -> None:
         ref_log = log if label.startswith("VFS columns") else log.iloc[:10_000]
         rsps, _ = _batch(ref, ref_log)
         batch.append(f"| {label} | {sps:,.0f} ({cpu:.1f}) | {rsps:,.0f} | {sps / rsps:.0f}x |")
+    from bench_batch_stages import _reference_us, suralp_stages, talos_stages
+    from bench_batch_stages import table as stage_table
+
+    ref_us = _reference_us()
+    stages = stage_table(suralp_stages(raw), talos_stages(), ref_us)
     load1 = os.getloadavg()[0]
     body = "\n".join([
         f"Command: `taskset -c 1 .venv/bin/python benchmarks/bench_compiled_monitor.py "
@@ -142,6 +147,14 @@ def main() -> None:
         "10,000 samples):",
         "",
         *batch,
+        "",
+        "Batch throughput stage by stage (`benchmarks/bench_batch_stages.py`; compiled "
+        "stages: minimum over 2,000-sample slices; whole runs: best process CPU time; "
+        f"reference: `numpy.sort` of 10^6 floats, {ref_us / 1e3:.0f} ms in this run). "
+        "Issue 11 targets: >= 1 M samples/s on SURALP, >= 300 k samples/s on a 30-joint "
+        "robot, kinematics included:",
+        "",
+        *stages,
     ])
     print(body)
     if a.write:

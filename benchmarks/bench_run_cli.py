@@ -10,7 +10,7 @@ once with ``grfguard simulate`` (or ``--log`` is used), then:
   function behind the command), CPU time (``time.process_time``) at the end of each
   step: interpreter start-up and imports, reading and validating the log, the unit
   checks, the monitor set-up (``Monitor.for_log``: numba cache load), ``Monitor.run``
-  split into the compiled loop (``MonitorKernel.run``) and the rest (input columns,
+  split into the compiled loop (``monitor_run_packed``) and the rest (input columns,
   output frame), writing the output; best of ``--repeat``;
 * **Parquet options**: writing and reading the output table with the previous options
   (zstd level 3, dictionary tried on every column) and the current ones
@@ -50,14 +50,14 @@ import grfguard.cli as cli
 import grfguard.kernels.monitor as km
 marks = [("imports", time.process_time())]
 kernel = [0.0]
-_run = km.MonitorKernel.run
-def timed(self, *a, **k):
+_run = km.monitor_run_packed
+def timed(*a, **k):
     t = time.process_time()
     try:
-        return _run(self, *a, **k)
+        return _run(*a, **k)
     finally:
         kernel[0] += time.process_time() - t
-km.MonitorKernel.run = timed
+km.monitor_run_packed = timed
 n = cli.run_log(__import__("pathlib").Path(sys.argv[1]), __import__("pathlib").Path(sys.argv[2]),
                 phase=lambda name: marks.append((name, time.process_time())))
 rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -69,7 +69,7 @@ PHASE_NAMES = {
     "read": "read + validate the log (Parquet)",
     "checks": "robot metadata + unit checks",
     "monitor_setup": "`Monitor.for_log` (config, kinematics, numba cache load)",
-    "kernel": "`Monitor.run`: compiled loop (`MonitorKernel.run`)",
+    "kernel": "`Monitor.run`: compiled loop (`monitor_run_packed`)",
     "frame": "`Monitor.run`: input columns + output frame",
     "write": "write the output (Parquet)",
 }

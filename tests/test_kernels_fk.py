@@ -89,3 +89,53 @@ def test_fk_batch_equals_one_sample_calls():
         # a few units in the last place on general trees (bit-equal on SURALP)
         np.testing.assert_allclose(com[t], d.subtree_com[1], rtol=0, atol=1e-12)
         np.testing.assert_allclose(xi[t], d.xipos, rtol=0, atol=1e-12)
+
+
+def test_quaternion_norm_band_leaves_the_quaternion_as_mujoco_does():
+    # fk's fast normalisation skips sqrt and division when |q.q - 1| < NQ_BAND; MuJoCo's
+    # mju_normalize4 leaves q unchanged when |sqrt(q.q) - 1| <= 1e-15: every double in the
+    # band must satisfy the latter (checked one by one; there are a few dozen)
+    from grfguard.kernels.fk import NQ_BAND
+
+    s = 1.0
+    checked = 0
+    for direction in (-np.inf, np.inf):
+        s = 1.0
+        while abs(s - 1.0) < NQ_BAND:
+            assert abs(float(np.sqrt(s)) - 1.0) <= 1e-15, s
+            s = float(np.nextafter(s, direction))
+            checked += 1
+    assert checked > 10
+
+
+def test_fast_kinematics_of_the_virtual_sensor_equal_fk_tree_bit_for_bit():
+    # the sensor's kinematics (bodies, the trunk's subtree CoM, site positions only) give
+    # the same bits as fk_tree + fk_sites on random configurations
+    from grfguard.kernels.fk import fk_bodies, fk_site_pos, subtree_com_of
+
+    model = build_model(SURALP)
+    tm = TreeModel.from_mujoco(model)
+    ref, fast = tm.new_frames(), tm.new_frames()
+    sites = np.arange(model.nsite, dtype=np.int64)
+    sxp, sxp2, sxm = (np.zeros((model.nsite, 3)), np.zeros((model.nsite, 3)),
+                      np.zeros((model.nsite, 9)))
+    rng = np.random.default_rng(3)
+    (parent, jntadr, jntnum, sameframe, pos, quat, ipos, iquat, mass, jtype, qadr, axis, jpos,
+     qpos0, order) = tm.arrays()
+    for _ in range(300):
+        q = qpos0.copy()
+        q[3:7] = rng.normal(size=4)
+        q[7:] += rng.uniform(-2.0, 2.0, size=q.size - 7)
+        fk_tree(q, *tm.arrays(), np.zeros(model.nq), *ref, np.zeros(model.nbody),
+                np.zeros(N_WORK))
+        fk_sites(sites, tm.site_body, tm.site_sameframe, tm.site_pos, tm.site_quat, ref[0],
+                 ref[1], ref[2], ref[3], ref[4], sxp, sxm, np.zeros(8))
+        fk_bodies(q, parent, jntadr, jntnum, sameframe, pos, quat, ipos, iquat, jtype, qadr,
+                  axis, jpos, qpos0, order, np.zeros(model.nq), *fast[:5])
+        com = subtree_com_of(1, parent, mass, fast[3], fast[5], np.zeros(model.nbody))
+        fk_site_pos(sites, tm.site_body, tm.site_sameframe, tm.site_pos, fast[0], fast[2],
+                    fast[3], sxp2)
+        for a, b in zip(ref[:5], fast[:5], strict=True):
+            assert np.array_equal(a, b)
+        assert np.array_equal(np.array(com), ref[5][1])
+        assert np.array_equal(sxp, sxp2)

@@ -35,7 +35,11 @@ class MonitorConfig:
         thresholds: Detector thresholds (default: the shipped calibrated ones).
         observer: The paper's observer settings (method ``paper``).
         vfs: Settings of the virtual force sensor (``VFSConfig``; None for its default).
-        dt_s: Sampling period [s].
+        dt_s: Sampling period of the log [s]. ``Monitor.for_log`` (through
+            :func:`config_for_log`) always replaces it by the log's rate, e.g. 0.01 for a
+            100 Hz log; the 1 ms default holds only for a monitor built without a log
+            (``Monitor(config)``, live use), so set it then to the period of the samples
+            fed. The observer's ``dt_s`` follows it (one rate per monitor).
         gate_liftoff_s: Swing test starts this long after the planned lift-off [s].
         gate_before_touchdown_s: Swing test stops this long before the expected
             touchdown [s].
@@ -83,6 +87,10 @@ class MonitorConfig:
                     raise ConfigError(f"monitor.{f.name} = {v!r} must be in [0, 100) s")
         if self.dt_s <= 0:
             raise ConfigError(f"monitor.dt_s = {self.dt_s!r} must be > 0 s")
+        if not isinstance(self.observer, ObserverConfig):
+            raise ConfigError("monitor.observer must be an ObserverConfig")
+        if self.observer.dt_s != self.dt_s:  # the observer runs at the monitor's rate
+            object.__setattr__(self, "observer", replace(self.observer, dt_s=self.dt_s))
 
     def with_method(self, method: str) -> MonitorConfig:
         """Copy with another detection method (``default`` or ``paper``)."""
@@ -150,7 +158,10 @@ class MonitorConfig:
 
 def config_for_log(log: pd.DataFrame, config: MonitorConfig | None = None) -> MonitorConfig:
     """``config`` (default :class:`MonitorConfig`) with the sampling period of ``log``
-    (median step of its ``time`` column [s]) in ``dt_s`` and in the observer's ``dt_s``."""
+    (median step of its ``time`` column [s]) in ``dt_s`` and in the observer's ``dt_s``:
+    whatever ``config.dt_s`` said, the monitor of a log runs at the log's rate (a 100 Hz
+    log gives ``dt_s = 0.01``). A log without ``time`` or with one row keeps
+    ``config.dt_s``."""
     cfg = config if config is not None else MonitorConfig()
     if TIME in log.columns and len(log) > 1:
         dt = float(np.median(np.diff(log[TIME].to_numpy(float))))

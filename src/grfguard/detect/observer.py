@@ -54,7 +54,10 @@ class ObserverConfig:
     Attributes:
         q: Process noise variance of both states, ``Q = q I`` [N²] (paper: 1e-10).
         r: Measurement noise variance ``R`` [N²] (paper: 1e-4).
-        dt_s: Sampling period in [s] (paper: 1 ms); used by the low-pass filter.
+        dt_s: Sampling period in [s]; used by the low-pass filter. The 1 ms default is
+            the paper's rate; inside a monitor it follows ``MonitorConfig.dt_s``, which
+            ``Monitor.for_log`` sets to the log's rate (0.01 for a 100 Hz log). ``q`` and
+            ``r`` are per-sample variances (the paper's values at 1 ms).
         lowpass_hz: Cut-off of the first-order low-pass on η̂ in [Hz].
         p0: Initial covariance of both states, ``P_0 = p0 I`` [N²] (full filter only).
         eta0_n: Initial fault estimate in [N].

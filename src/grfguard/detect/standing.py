@@ -34,11 +34,16 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from grfguard._validate import check_number
+from grfguard.errors import ConfigError
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = ["StandEnd", "StandingConfig", "StandingDetector", "StandingStage"]
 
-_N = 8
+# The schema's corner cells ``r1..r4, l1..l4``: four load cells per sole (the corner-cell
+# sensing of a robot TOML). This layer works on them by design; robots with ankle
+# force/torque sensors go through ``detect/channels.py``, which takes any channel list.
+_N = len(SENSOR_NAMES)
+_MID = _N // 2 - 1  # with one sensor left out, the median of the others is order[_MID(+1)]
 _NAN = float("nan")
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
@@ -121,12 +126,16 @@ class StandingDetector:
     with flagged sensors (None otherwise; the caller may clear it).
 
     Args:
-        dt_s: Sampling period in [s].
+        dt_s: Sampling period of the log [s] (required: real robots log at 100 Hz to 1 kHz;
+            the monitor passes its ``config.dt_s``, the log's rate).
         config: Settings.
+
+    Raises:
+        ConfigError: If ``dt_s`` is not a positive number of seconds.
     """
 
-    def __init__(self, dt_s: float = 0.001, config: StandingConfig | None = None) -> None:
-        self.dt_s = float(dt_s)
+    def __init__(self, dt_s: float, config: StandingConfig | None = None) -> None:
+        self.dt_s = _check_dt(dt_s)
         self.config = config if config is not None else StandingConfig()
         self._a = (1.0 if self.config.filter_s <= 0
                    else 1.0 - math.exp(-self.dt_s / self.config.filter_s))
@@ -277,7 +286,7 @@ class StandingDetector:
         dev_s = [q - b if q == q else 0.0 for q, b in zip(lp, base, strict=True)]
         dev = [abs(q) for q in dev_s]
         order = sorted(dev)
-        o3, o4 = order[3], order[4]  # the median of the other seven is one of these
+        o3, o4 = order[_MID], order[_MID + 1]  # the median of the other _N - 1 is one of these
         flags, half_t = self._flags, self._half_t
         changed = False
         for i in range(_N):
@@ -316,6 +325,15 @@ class StandingDetector:
             self._any = any(flags)
 
 
+def _check_dt(dt_s: float) -> float:
+    """``dt_s`` as a float [s]; ConfigError unless it is a number in (0, 1) s."""
+    if isinstance(dt_s, bool) or not isinstance(dt_s, (int, float)) or not (
+            0.0 < float(dt_s) < 1.0):
+        raise ConfigError(f"standing: dt_s = {dt_s!r} must be the log's sampling period, "
+                          "a number in (0, 1) s (e.g. 0.01 for a 100 Hz log)")
+    return float(dt_s)
+
+
 def _contact(cref: float, cest: float) -> bool:
     """Contact from the planned contact, else the estimated one (NaN: no contact)."""
     c = cref if math.isfinite(cref) else cest
@@ -341,14 +359,20 @@ class StandingStage:
     and the kind becomes ``gain``.
 
     Args:
-        dt_s: Sampling period [s].
+        dt_s: Sampling period of the log [s]. :class:`~grfguard.detect.Monitor` always
+            passes its ``config.dt_s`` (the log's rate, from ``Monitor.for_log``). The
+            1 ms default is there only for :func:`grfguard.kernels.monitor.warm_monitor`,
+            which builds a stage without a log to compile the kernels; pass the rate.
         config: Settings of the standing detector.
+
+    Raises:
+        ConfigError: If ``dt_s`` is not a positive number of seconds.
     """
 
     def __init__(self, dt_s: float = 0.001, config: StandingConfig | None = None) -> None:
         self.detector = StandingDetector(dt_s, config)
         tau = self.detector.config.hold_filter_s
-        self._a_hold = 1.0 if tau <= 0 else 1.0 - math.exp(-float(dt_s) / tau)
+        self._a_hold = 1.0 if tau <= 0 else 1.0 - math.exp(-self.detector.dt_s / tau)
         self.reset()
 
     def reset(self) -> None:

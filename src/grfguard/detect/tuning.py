@@ -4,10 +4,10 @@ The detector's thresholds (CUSUM allowances and thresholds, noise scales) are
 *calibrated* from fault-free walks and live in :class:`~grfguard.detect.thresholds.Thresholds`;
 its gates (how long after a touchdown a test starts, ...) are user settings of
 :class:`~grfguard.detect.config.MonitorConfig`. What remains are the design constants
-below: they were set by hand when the detector was written (on the default 60 s SURALP
-walk and the fault scenarios of ``benchmarks/bench_monitor.py``) and are not meant to be
-changed per robot. They are named here so that a reader of the decision code sees a
-name, a unit and a reason instead of a bare number.
+below: they were set by hand when the detector was written (on the default 60 s walk of
+the reference robot (SURALP) and the fault scenarios of ``benchmarks/bench_monitor.py``)
+and are not meant to be changed per robot. They are named here so that a reader of the
+decision code sees a name, a unit and a reason instead of a bare number.
 
 Durations are in seconds; a count of samples is derived at the log's sampling period
 with :meth:`DetectTuning.samples` (``round(duration / dt)``; at 1 kHz 0.02 s = 20

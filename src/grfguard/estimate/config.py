@@ -67,7 +67,9 @@ class VFSConfig:
     acc_cutoff: float = 40.0
     #: Order of the Butterworth filters.
     filter_order: int = 2
-    #: Sampling period in [s] (taken from the log when it has a ``time`` column).
+    #: Sampling period in [s]. ``VirtualForceSensor.for_log`` replaces it by the log's
+    #: rate (median step of ``time``; 0.01 for a 100 Hz log); the 1 ms default holds only
+    #: for a sensor built without a log, so set it then to the period of the samples fed.
     dt: float = 0.001
     #: Time constant of the complementary attitude filter (gyro integration pulled toward
     #: the logged IMU quaternion) in [s]; 0 uses the logged quaternion as is.
@@ -91,8 +93,9 @@ class VFSConfig:
     #: Corner contact stiffness per kg of robot mass in [N/(m kg)] for the sole-compliance
     #: prior of the corner QP (:mod:`grfguard.kernels.nnls`: lower corners carry
     #: more load; recovers the internal forces between the feet that a rigid QP cannot
-    #: see). MuJoCo's default soft contact measured 4.2e3 (SURALP 114 kg: 4.8e5 N/m; the
-    #: 60 kg robot: 2.5e5 N/m); calibrate it for a real sole. 0 disables the prior.
+    #: see). MuJoCo's default soft contact measured 4.2e3 on the simulated robots (the
+    #: 114 kg reference robot: 4.8e5 N/m; a 60 kg one: 2.5e5 N/m); calibrate it for a
+    #: real sole. 0 disables the prior.
     contact_stiffness_per_kg: float = 4200.0
     #: Corner height above the ground plane below which a corner counts as touching, in [m]
     #: (kinematic contact; heel-first landing and toe-off).

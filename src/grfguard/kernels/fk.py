@@ -21,8 +21,8 @@ import numpy as np
 from grfguard.errors import ConfigError
 from grfguard.kernels._jit import borrow, njit, njit_nort, view1d, view2d
 
-__all__ = ["TreeModel", "fk_tree", "fk_sites", "fk_batch", "N_WORK", "FREE", "BALL", "SLIDE",
-           "HINGE"]
+__all__ = ["TreeModel", "fk_tree", "fk_bodies", "fk_sites", "fk_site_pos", "subtree_com_of",
+           "fk_batch", "N_WORK", "FREE", "BALL", "SLIDE", "HINGE"]
 
 FREE, BALL, SLIDE, HINGE = 0, 1, 2, 3
 _MINVAL = 1e-15
@@ -146,6 +146,27 @@ def _nq(q0, q1, q2, q3):
     return q0, q1, q2, q3
 
 
+#: ``|q.q - 1|`` below this: ``|sqrt(q.q) - 1| <= 1e-15`` for sure (every double in the
+#: band is checked in ``tests/test_kernels_fk.py``), so :func:`_nq` returns ``q`` as it is.
+NQ_BAND = 1.5e-15
+
+
+@njit_nort
+def _nq_slow(q0, q1, q2, q3):
+    return _nq(q0, q1, q2, q3)
+
+
+@njit_nort(inline="always")
+def _nqf(q0, q1, q2, q3):
+    """:func:`_nq` with the usual case (a product of unit quaternions, norm within a few
+    units in the last place of 1) decided without the square root and the division,
+    which kept the chain of body orientations waiting; same result bit for bit."""
+    s = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    if abs(s - 1.0) < NQ_BAND:
+        return q0, q1, q2, q3
+    return _nq_slow(q0, q1, q2, q3)
+
+
 @njit_nort(inline="always")
 def _mq(a0, a1, a2, a3, b0, b1, b2, b3):
     """mju_mulQuat."""
@@ -238,6 +259,17 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
     ``xpos``, ``xquat``, ``xmat``, ``xipos``, ``ximat``, ``subtree_com`` [m] (``qpos``: work
     copy of ``qpos_in``; ``work`` unused). Bodies in ``body_order`` (parents first; each
     body's arithmetic is MuJoCo's, so the order changes no bit). No allocation."""
+    fk_bodies(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
+              body_quat, body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos,
+              qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat)
+    _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
+
+
+@njit_nort(inline="always")
+def fk_bodies(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos,
+              body_quat, body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos,
+              qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat):
+    """:func:`fk_tree` without the subtree CoMs (see :func:`subtree_com_of`)."""
     nb = body_parent.shape[0]
     _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
     _world_frame(xpos, xquat, xmat, xipos, ximat)
@@ -296,7 +328,7 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
                     p0 += v0 - w0
                     p1 += v1 - w1
                     p2 += v2 - w2
-        q0, q1, q2, q3 = _nq(q0, q1, q2, q3)
+        q0, q1, q2, q3 = _nqf(q0, q1, q2, q3)
         xquat[i, 0] = q0
         xquat[i, 1] = q1
         xquat[i, 2] = q2
@@ -308,7 +340,6 @@ def fk_tree(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, body
         for k in range(9):
             xmat[i, k] = r[k]
     _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat)
-    _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree)
 
 
 @njit_nort(inline="always")
@@ -369,6 +400,48 @@ def _subtree_coms(body_parent, body_mass, xipos, subtree_com, mass_subtree):
             inv = 1.0 / max(_MINVAL, mass_subtree[i])
             for k in range(3):
                 subtree_com[i, k] = subtree_com[i, k] * inv
+
+
+@njit_nort(inline="always")
+def subtree_com_of(b, body_parent, body_mass, xipos, subtree_com, mass_subtree):
+    """The subtree CoM of body ``b`` alone (3 floats) [m]: :func:`_subtree_coms`'s backward
+    pass in the same order (same bits), without normalising the other bodies."""
+    nb = body_parent.shape[0]
+    for i in range(nb):
+        for k in range(3):
+            subtree_com[i, k] = xipos[i, k] * body_mass[i]
+        mass_subtree[i] = body_mass[i]
+    for i in range(nb - 1, b, -1):
+        p = body_parent[i]
+        for k in range(3):
+            subtree_com[p, k] += subtree_com[i, k]
+        mass_subtree[p] += mass_subtree[i]
+    if mass_subtree[b] < _MINVAL:
+        return xipos[b, 0], xipos[b, 1], xipos[b, 2]
+    inv = 1.0 / max(_MINVAL, mass_subtree[b])
+    return subtree_com[b, 0] * inv, subtree_com[b, 1] * inv, subtree_com[b, 2] * inv
+
+
+@njit_nort(inline="always")
+def fk_site_pos(sites, site_body, site_sameframe, site_pos, xpos, xmat, xipos, site_xpos):
+    """:func:`fk_sites` without the sites' orientations: positions only."""
+    for n in range(sites.shape[0]):
+        s = sites[n]
+        b = site_body[s]
+        sf = site_sameframe[s]
+        if sf == 0 or sf == 3 or sf == 4:
+            v0, v1, v2 = _mv(xmat[b, 0], xmat[b, 1], xmat[b, 2], xmat[b, 3], xmat[b, 4],
+                             xmat[b, 5], xmat[b, 6], xmat[b, 7], xmat[b, 8],
+                             site_pos[s, 0], site_pos[s, 1], site_pos[s, 2])
+            site_xpos[n, 0] = v0 + xpos[b, 0]
+            site_xpos[n, 1] = v1 + xpos[b, 1]
+            site_xpos[n, 2] = v2 + xpos[b, 2]
+        elif sf == 1:
+            for k in range(3):
+                site_xpos[n, k] = xpos[b, k]
+        else:
+            for k in range(3):
+                site_xpos[n, k] = xipos[b, k]
 
 
 @njit_nort(inline="always")

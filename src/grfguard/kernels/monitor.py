@@ -643,13 +643,17 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     src = [(_column(log, c) if c in log.columns else None) for c in cols]
     Y = np.empty((n, len(k.out_cols)), order="F")  # columns contiguous: no copy each
     EX = np.empty((n, N_EX))
-    X = np.empty((min(chunk, n), len(cols)))
+    m = min(chunk, n)
+    X = np.empty((m, len(cols)))
+    Yc = np.empty((m, len(k.out_cols)))  # one buffer per run (MonitorKernel.run's own
+    EXc = np.empty((m, N_EX))  # arrays would be fresh, page-faulted memory every chunk)
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         xb = X[: b - a]
         for j, arr in enumerate(src):
             xb[:, j] = arr[a:b] if arr is not None else math.nan
-        yb, eb = k.run(xb)
+        yb, eb = Yc[: b - a], EXc[: b - a]
+        monitor_run_packed(xb, yb, eb, k.F, k.I)  # = k.run(xb), into the buffers
         Y[a:b] = yb
         EX[a:b] = eb
     new: dict[str, Any] = {}

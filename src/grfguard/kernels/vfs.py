@@ -47,7 +47,7 @@ from grfguard.io.schema import (
     ZMP_REF,
 )
 from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
-from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
+from grfguard.kernels.fk import TreeModel, fk_bodies, fk_site_pos, fk_sites, subtree_com_of
 from grfguard.kernels.nnls import prior_qp
 from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     N_XSTATE,
@@ -403,22 +403,25 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     qin[r + 6] = tz
     for j in range(12):
         qin[iprm[_IP_JOINTS + j]] = x[j]
-    fk_tree(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
-            body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-            body_order, qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, work)
+    # fk_tree's bodies, then the subtree CoM of the trunk only (same bits)
+    fk_bodies(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
+              body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
+              body_order, qpos, xpos, xquat, xmat, xipos, ximat)
     sel[0] = iprm[_IP_IMU]
     for k in range(8):
         sel[1 + k] = iprm[_IP_CORNERS + k]
     sel[9] = iprm[_IP_SOLES]
     sel[10] = iprm[_IP_SOLES + 1]
-    fk_sites(sel, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
-             ximat, sxp, sxm, work)
+    if prm[P_KANC] > 0.0 or prm[P_SPLIT_PAPER] != 0.0:  # the paper stages use the sole axes
+        fk_sites(sel, site_body, site_sameframe, site_pos, site_quat, xpos, xquat, xmat, xipos,
+                 ximat, sxp, sxm, work)
+    else:
+        fk_site_pos(sel, site_body, site_sameframe, site_pos, xpos, xmat, xipos, sxp)
     for k in range(8):
         pk[k, 0] = sxp[1 + k, 0]
         pk[k, 1] = sxp[1 + k, 1]
         pk[k, 2] = sxp[1 + k, 2] - corner_radius[k]
-    trunk = iprm[_IP_TRUNK]
-    return stc[trunk, 0], stc[trunk, 1], stc[trunk, 2]
+    return subtree_com_of(iprm[_IP_TRUNK], body_parent, body_mass, xipos, stc, msub)
 
 
 @njit_nort(inline="always")
