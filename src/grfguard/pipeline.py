@@ -447,7 +447,10 @@ class Monitor:
         return vdf, k_vib
 
     def _vibration_on(self) -> None:
-        """Switch the detector to the widened corner threshold (once)."""
+        """Switch the detector to the widened corner threshold (once); the virtual forces
+        change source: the fits settle again (as after a tilt change)."""
+        if not self._vib_active:
+            self._tilt_settle_s = 1.0
         self.detector.config = self._quiet_config
         self._vib_active = True
 
@@ -532,6 +535,8 @@ class Monitor:
         if self._tilt_settle_s > 0.0:
             self._tilt_settle_s -= self.config.dt_s
             self.common.reset()
+            if self.standing is not None:  # nor a stand's baseline across the change
+                self.standing.detector.reset()
         cm = self.common.update(x, p.v, valid, frozen=frozen, planned=p.cref)
         v, tot = p.v, p.tot
         if cm.model_mismatch:

@@ -37,6 +37,7 @@ import numpy as np
 from grfguard.kernels._jit import njit, view1d
 from grfguard.kernels.detect import CN, CP, FLAG, G_GNEG, G_GPOS, P_CORSIG, SWN, SWP, _fsum
 from grfguard.kernels.standing import _STAGE as SD_STAGE
+from grfguard.kernels.standing import _det_reset
 from grfguard.kernels.vfs import _S_ANCHOR, _kinematics, _scratch_views, _unpack, vfs_step
 from grfguard.model.robot import SENSOR_NAMES
 
@@ -368,6 +369,7 @@ def _vibration(yp, ys, ax, ay):
     ys[S_VRMS] = math.sqrt(ys[S_VMS])
     if ys[S_VT] >= yp[Y_V_START] and ys[S_VRMS] > yp[Y_V_LIMIT]:
         ys[S_VON] = 1.0
+        ys[S_TSETTLE] = 1.0  # Monitor._vibration_on: the fits settle again
     return ys[S_VON] != 0.0
 
 
@@ -652,6 +654,7 @@ def sys_pre_detect(yp, ys, ss, gs, x, v, tot, cref, cest, sd):
     if ys[S_TSETTLE] > 0.0:
         ys[S_TSETTLE] -= yp[Y_DT]
         _cm_reset(ys)
+        _det_reset(sd)  # the standing detector's baseline too
     _cm_update(yp, ys, x, v, va0, va1, frozen, cref, part)
     if ys[S_CMCODE] != 0.0:
         for i in range(8):
