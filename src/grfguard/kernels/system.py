@@ -36,6 +36,7 @@ import numpy as np
 
 from grfguard.kernels._jit import njit, view1d
 from grfguard.kernels.detect import CN, CP, FLAG, G_GNEG, G_GPOS, P_CORSIG, SWN, SWP, _fsum
+from grfguard.kernels.fk import fk_sites
 from grfguard.kernels.standing import _STAGE as SD_STAGE
 from grfguard.kernels.standing import _det_reset
 from grfguard.kernels.vfs import _S_ANCHOR, _kinematics, _scratch_views, _unpack, vfs_step
@@ -239,6 +240,10 @@ def _tilt(yp, ys, xc, dt, cf, ci, vws, viws):
     _kinematics(x, prm, iprm, tree, sites, corner_radius, xc[iw], xc[iw + 1], xc[iw + 2],
                 xc[iw + 3], qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin,
                 pk, tail, view1d(viws, 32, 11))
+    # the sole axes (the sensor's kinematics compute them only for the paper stages)
+    site_body, site_sameframe, site_pos, site_quat = sites
+    fk_sites(view1d(viws, 32, 11), site_body, site_sameframe, site_pos, site_quat, xpos, xquat,
+             xmat, xipos, ximat, sxp, sxm, tail)
     zs0 = (sxm[9, 2] + sxm[10, 2]) / 2.0
     zs1 = (sxm[9, 5] + sxm[10, 5]) / 2.0
     zs2 = (sxm[9, 8] + sxm[10, 8]) / 2.0
