@@ -559,8 +559,6 @@ def compiled_monitor(log: pd.DataFrame, config: Any = None, warm: bool = True) -
     return mon
 
 # ---------------------------------------------------------------- Monitor glue
-_KIND_OBJ = np.array(KIND_NAMES, dtype=object)
-_STATE_OBJ = np.array(SYSTEM_STATES, dtype=object)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
