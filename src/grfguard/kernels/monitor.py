@@ -559,8 +559,6 @@ def compiled_monitor(log: pd.DataFrame, config: Any = None, warm: bool = True) -
     return mon
 
 # ---------------------------------------------------------------- Monitor glue
-_KIND_OBJ = np.array(KIND_NAMES, dtype=object)
-_STATE_OBJ = np.array(SYSTEM_STATES, dtype=object)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
@@ -751,12 +749,15 @@ def warm_monitor() -> None:
     from grfguard.kernels.detect import detect_params
     from grfguard.model.robot import RobotConfig
 
-    prm = detect_params(MonitorConfig())
+    # No log here: the kernels compile for the argument types, so the reference robot and
+    # the config's period serve (a monitor built for a log passes the log's rate).
+    cfg = MonitorConfig()
+    prm = detect_params(cfg)
     guard = InputGuard(RobotConfig())
     from grfguard.detect.standing import StandingStage
 
     for vk in (None, VFSKernel(VirtualForceSensor())):
-        k = MonitorKernel(prm, guard, vk, StandingStage())
+        k = MonitorKernel(prm, guard, vk, StandingStage(cfg.dt_s))
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))
         k.run(x[None, :])

@@ -894,11 +894,6 @@ def vfs_run(X, Y, state, cf, ci, ws, iws):
     return n
 
 
-#: Former names of :func:`vfs_step` / :func:`vfs_run`.
-vfs_step_packed = vfs_step
-vfs_run_packed = vfs_run
-
-
 _ND = np.ndarray
 _F8 = np.dtype(np.float64)
 _XST = (8,)
