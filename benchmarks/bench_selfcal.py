@@ -25,6 +25,7 @@ replaces the ``## Model self-calibration`` section at the end of BENCHMARKS.md.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -61,7 +62,9 @@ READING = (
     "still 1.51 %) or fitted jointly with the gains (1.68 %); blends of both references "
     "(1.16-1.40 % on seed 1, no better than the odometry on seeds 2-3: 1.17-1.52 %); "
     "other odometry settings (anchored sole attitude 0.05 / 0.3 s, contact height 1 mm: "
-    "1.20-1.56 %). Where the odometry error comes from (against the simulation's "
+    "1.20-1.56 %); the fit's band and ridge (1, 1.5, 2, 3, 4 Hz x 0.003, 0.01, 0.03 on "
+    "seeds 1-3: the present 2 Hz and 0.01 is the best of that grid). Where the "
+    "odometry error comes from (against the simulation's "
     "truth): the true encoder offsets and IMU mounting instead of the fitted ones leave "
     "it at 1.02 N (gains 1.39 %); without the 2 % of leg mass in the trunk it is 0.64 N "
     "but the gains are 1.46 %; the stance sole sinks 0.2-0.3 mm RMS into the soft "
@@ -192,6 +195,7 @@ def main() -> None:
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     t0 = time.time()
+    load0 = os.getloadavg()[0]
     gap = load_reality("all")
     nominal = RobotConfig()
     lines = []
@@ -293,7 +297,9 @@ def main() -> None:
                           f"{x['weight_pct']:+.2f} %" for x in spread) + "."]
     lines += ["", READING]
     lines += ["", "Other walks, healthy-sensor alarm episodes: " + "; ".join(fa_rows) + ".",
-              "", f"Runtime {runtime:.0f} s on the shared 2-core machine.", ""]
+              "", f"Runtime {runtime:.0f} s on the shared 2-core machine (load average "
+              f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end), measured "
+              f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.", ""]
     text = "\n".join(lines)
     print(text)
     if args.write:

@@ -21,9 +21,8 @@ import numpy as np
 
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINT_NAMES, SIDES, RobotConfig
-from grfguard.rotations import quat_to_matrix
 
-__all__ = ["KinematicModel", "KinematicFrames", "quat_to_matrix"]
+__all__ = ["KinematicModel", "KinematicFrames"]
 
 
 @dataclass
@@ -87,8 +86,6 @@ class KinematicModel:
         self.imu_site = imu
         if int(m.site_bodyid[imu]) != self.trunk_id:
             raise ConfigError("the `imu` site must sit on the `trunk` body")
-        #: Rotation of the IMU site in the trunk frame.
-        self.R_TI = quat_to_matrix(np.array(m.site_quat[imu]))
         q_TI = np.array(m.site_quat[imu], float)
         #: Conjugate of the IMU site quaternion in the trunk: ``q_WT = q_WI (x) q_TI^-1``.
         self._q_IT = np.array([q_TI[0], -q_TI[1], -q_TI[2], -q_TI[3]]) / np.linalg.norm(q_TI)

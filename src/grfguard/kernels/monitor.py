@@ -88,10 +88,9 @@ from grfguard.kernels.vfs import (
     VFSKernel,
     vfs_step,
 )
-from grfguard.kernels.warmup import warm_up
 from grfguard.model.robot import SENSOR_NAMES, SIDES
 
-__all__ = ["compiled_monitor", "input_columns", "output_columns", "monitor_step",
+__all__ = ["input_columns", "output_columns", "monitor_step",
            "monitor_run", "MonitorKernel", "update_dict", "run_frame", "dict_to_row",
            "warm_monitor", "monitor_step_packed", "monitor_run_packed"]
 
@@ -540,23 +539,6 @@ def monitor_run_packed(X, Y, EX, F, I):
         monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
                      viws, xc, vy, ws, sy)
 
-
-def compiled_monitor(log: pd.DataFrame, config: Any = None, warm: bool = True) -> Any:
-    """``Monitor.for_log(log, config)`` (whose virtual force sensor is the compiled one
-    whenever the kernel covers the settings), kept for its old callers.
-
-    Args:
-        log: A log of the contract (robot and sampling period are read from it).
-        config: A :class:`~grfguard.detect.MonitorConfig` (default settings if None).
-        warm: Compile or load the kernels now (:func:`warm_up`) instead of at the first
-            sample.
-    """
-    from grfguard.detect import Monitor
-
-    mon = Monitor.for_log(log, config)
-    if warm and getattr(mon.vfs, "compiled", False):
-        warm_up()
-    return mon
 
 # ---------------------------------------------------------------- Monitor glue
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
