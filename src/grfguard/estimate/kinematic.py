@@ -33,7 +33,8 @@ class KinematicFrames:
         p_AC: (T, 3) whole-body CoM in frame A [m].
         p_AB: (T, nb, 3) body CoMs in A [m].
         R_WB: (T, nb, 3, 3) body inertia-frame rotations.
-        p_AK: (T, 8, 3) lowest point of each corner sphere in A [m], order r1..r4, l1..l4.
+        p_AK: (T, n_corner, 3) lowest point of each corner sphere in A [m], in the order of
+            ``KinematicModel.corner_sites`` (``r1..r4, l1..l4`` for four cells per sole).
         p_AS: (T, 2, 3) sole-centre sites in A [m], right then left.
         R_WS: (T, 2, 3, 3) sole frame rotations.
         p_AI: (T, 3) IMU site in A [m].
@@ -110,7 +111,9 @@ class KinematicModel:
         """Kinematics of one sample.
 
         Args:
-            q_rad: (12,) joint angles in JOINT_NAMES order [rad].
+            q_rad: (n,) joint angles [rad], one per model joint in :data:`JOINT_NAMES`
+                order, ``n = len(self.joint_qadr)`` (the joints the model's naming
+                contract lists; no count is assumed here).
             quat_imu_wxyz: (4,) IMU attitude in world.
 
         Returns:

@@ -731,12 +731,15 @@ def warm_monitor() -> None:
     from grfguard.kernels.detect import detect_params
     from grfguard.model.robot import RobotConfig
 
-    prm = detect_params(MonitorConfig())
+    # No log here: the kernels compile for the argument types, so the reference robot and
+    # the config's period serve (a monitor built for a log passes the log's rate).
+    cfg = MonitorConfig()
+    prm = detect_params(cfg)
     guard = InputGuard(RobotConfig())
     from grfguard.detect.standing import StandingStage
 
     for vk in (None, VFSKernel(VirtualForceSensor())):
-        k = MonitorKernel(prm, guard, vk, StandingStage())
+        k = MonitorKernel(prm, guard, vk, StandingStage(cfg.dt_s))
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))
         k.run(x[None, :])

@@ -39,7 +39,14 @@ from grfguard.kernels.detect import CN, CP, FLAG, G_GNEG, G_GPOS, P_CORSIG, SWN,
 from grfguard.kernels.fk import fk_sites
 from grfguard.kernels.standing import _STAGE as SD_STAGE
 from grfguard.kernels.standing import _det_reset
-from grfguard.kernels.vfs import _S_ANCHOR, _kinematics, _scratch_views, _unpack, vfs_step
+from grfguard.kernels.vfs import (
+    _NJ,
+    _S_ANCHOR,
+    _kinematics,
+    _scratch_views,
+    _unpack,
+    vfs_step,
+)
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = ["N_SYSP", "N_SYSS", "OUT_COLUMNS", "system_params", "system_reset",
@@ -224,7 +231,7 @@ def _tilt(yp, ys, xc, dt, cf, ci, vws, viws):
         return
     iq = int(yp[Y_I_Q])
     iw = int(yp[Y_I_QUAT])
-    for j in range(12):
+    for j in range(_NJ):
         if not math.isfinite(xc[iq + j]):
             return
     for j in range(4):
