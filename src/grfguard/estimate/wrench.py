@@ -84,7 +84,14 @@ def wrench_columns(est: WrenchEstimate) -> pd.DataFrame:
 
 
 def _deriv(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
-    return savgol_filter(x, win, 3, deriv=order, delta=dt, axis=0, mode="interp")
+    """Savitzky-Golay (cubic) derivative of order ``order`` along axis 0. Filtered along
+    contiguous rows of the transpose: the same correlation per column, so the same bits,
+    without the strided access of ``axis=0`` on a (T, k) array."""
+    if x.ndim != 2:
+        return savgol_filter(x, win, 3, deriv=order, delta=dt, axis=0, mode="interp")
+    y = savgol_filter(np.ascontiguousarray(x.T), win, 3, deriv=order, delta=dt, axis=-1,
+                      mode="interp")
+    return np.ascontiguousarray(y.T)
 
 
 def _win(seconds: float, dt: float, n: int) -> int:
