@@ -50,6 +50,33 @@ SECTION = "## Described robots: compiled inverse dynamics (issue 11)"
 _COMPILED = wrench.estimate_wrenches
 
 
+#: Analysis written with the figures (kept in the section when the script re-runs).
+NOTES = """
+Where the time goes (Talos, 20,000 samples, `cProfile` of `estimate_wrenches` and
+`run_described` on 2026-11-26 under load 6-11, shares of the profiled time): the compiled
+inverse dynamics (`wrench_batch`: kinematics of 60 bodies, `cdof`, velocities,
+accelerations, body forces, the sole and F/T wrenches) 39 %; the Savitzky-Golay filters
+(101 taps at 1 kHz on 32 joints x 3 derivative orders, the soles, the gyro; scipy's
+`correlate1d`) 24 %; the first kinematics pass (`frames_batch`: IMU and soles with the base
+at identity) 11 %; the SVD that orthonormalises the leveled attitude 8 %; array assembly
+and the rest 18 %. In `run_described`, the Talos channel monitor
+(`grfguard.detect.channels.ChannelMonitor.run`, pure Python per sample: 12 channel steps
+per sample) takes about as long as the virtual wrenches or longer.
+
+Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
+kinematics included): **not met.** The virtual wrenches went from 5-12 k to 25-45 k samples/s
+of CPU time (the figure moves with the load: G1's whole-monitor row coming out faster
+than its wrenches alone is that noise); the whole Talos monitor to 13-18 k/s. Left:
+(1) the channel monitor compiled (Python per sample today); (2) the Savitzky-Golay
+filters (a 101-tap correlation per column and order; an FFT or recursive form, or one
+compiled pass computing q, q', q'' together); (3) the inverse dynamics itself, about 10 µs
+per sample for Talos's 60 bodies (28 of them welded to their parent: summing their
+inertias into the parent's was tried and gained nothing measurable; the arithmetic is
+MuJoCo's ~250 flops per body); (4) the leveled attitude's SVD (a closed form). 300 k/s is
+3.3 µs per sample for everything: the kinematics of 60 bodies alone take about 3 µs.
+"""
+
+
 def _reference(*args, **kwargs):
     return _COMPILED(*args, compiled=False, **kwargs)
 
@@ -123,7 +150,7 @@ def main(argv: list[str] | None = None) -> None:
         "path (`estimate_wrenches(compiled=False)`, kept as the reference); \"after\": "
         "the compiled kinematics and inverse dynamics (`grfguard.kernels.rne`), timed in "
         f"the same process. Best CPU time of {a.repeats} (after) / {a.ref_repeats} (before) "
-        "runs.\n\n" + table + "\n")
+        "runs.\n\n" + table + "\n" + NOTES)
     print(body)
     if not a.no_write:
         update_section(SECTION, body)
