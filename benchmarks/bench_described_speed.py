@@ -57,23 +57,25 @@ Where the time goes (Talos, 20,000 samples, `cProfile` of `estimate_wrenches` an
 inverse dynamics (`wrench_batch`: kinematics of 60 bodies, `cdof`, velocities,
 accelerations, body forces, the sole and F/T wrenches) 39 %; the Savitzky-Golay filters
 (101 taps at 1 kHz on 32 joints x 3 derivative orders, the soles, the gyro; scipy's
-`correlate1d`) 24 %; the first kinematics pass (`frames_batch`: IMU and soles with the base
-at identity) 11 %; the SVD that orthonormalises the leveled attitude 8 %; array assembly
-and the rest 18 %. In `run_described`, the Talos channel monitor
+`correlate1d`) 24 %; the first kinematics pass (`frames_batch`: IMU and soles with the
+base at identity) 11 %; the SVD that orthonormalises the leveled attitude 8 %; array
+assembly and the rest 18 %. In `run_described`, the Talos channel monitor
 (`grfguard.detect.channels.ChannelMonitor.run`, pure Python per sample: 12 channel steps
 per sample) takes about as long as the virtual wrenches or longer.
 
 Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
-kinematics included): **not met.** The virtual wrenches went from 5-12 k to 25-45 k samples/s
-of CPU time (the figure moves with the load: G1's whole-monitor row coming out faster
-than its wrenches alone is that noise); the whole Talos monitor to 13-18 k/s. Left:
-(1) the channel monitor compiled (Python per sample today); (2) the Savitzky-Golay
-filters (a 101-tap correlation per column and order; an FFT or recursive form, or one
-compiled pass computing q, q', q'' together); (3) the inverse dynamics itself, about 10 µs
-per sample for Talos's 60 bodies (28 of them welded to their parent: summing their
-inertias into the parent's was tried and gained nothing measurable; the arithmetic is
-MuJoCo's ~250 flops per body); (4) the leveled attitude's SVD (a closed form). 300 k/s is
-3.3 µs per sample for everything: the kinematics of 60 bodies alone take about 3 µs.
+kinematics included): **not met.** The virtual wrenches went from 5-12 k to 25-45 k
+samples/s of CPU time (the figure moves with the load: G1's whole-monitor row coming out
+faster than its wrenches alone is that noise); the whole Talos monitor to 13-18 k/s. Left:
+(1) the channel monitor compiled (Python per sample today); (2) the Savitzky-Golay filters
+(a 101-tap correlation per column and order; an FFT or recursive form, or one compiled
+pass computing q, q', q'' together; a plain numba loop tap by tap was tried and ran
+1.4-2.6x slower than scipy's `correlate1d`, not vectorised); (3) the inverse dynamics
+itself, about 10 µs per sample for Talos's 60 bodies (28 of them welded to their parent:
+summing their inertias into the parent's was tried and gained nothing measurable; the
+arithmetic is MuJoCo's ~250 flops per body); (4) the leveled attitude's SVD (a closed
+form). 300 k/s is 3.3 µs per sample for everything: the kinematics of 60 bodies alone take
+about 3 µs.
 """
 
 
