@@ -45,6 +45,7 @@ from grfguard.kernels.vfs import (
     _kinematics,
     _scratch_views,
     _unpack,
+    resolve_pending,
     same_front_state,
     vfs_step,
     vfs_step_shared,
@@ -408,15 +409,18 @@ def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws,
     :func:`sys_twin_prepare`; with ``share`` and a valid main sample it takes the main's
     front of the step, state ``vstate`` / scratch ``vws``), the vibration switch; once on,
     the twin's outputs replace ``vy``, ``v``, ``tot``, ``cest`` and the corner threshold is
-    widened. Returns the sample's ``valid``."""
+    widened (before that the twin's outputs are not computed, only its filters run).
+    Returns the sample's ``valid``."""
     if yp[Y_V_ON] == 0.0:
         return valid
-    if share and valid:
-        vfs_step_shared(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws, vstate, vws)
-    else:
-        vfs_step(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws)
     ia = int(yp[Y_I_ACC])
-    if not _vibration(yp, ys, xc[ia], xc[ia + 1]):
+    on = _vibration(yp, ys, xc[ia], xc[ia + 1])  # (reads neither sensor)
+    if share and valid:  # the twin's outputs computed only when used
+        vfs_step_shared(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws, vstate, vws, on)
+    else:
+        resolve_pending(qy, qstate, qcf, qci, qws, qiws)
+        vfs_step(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws)
+    if not on:
         return valid
     for j in range(qy.shape[0]):
         vy[j] = qy[j]

@@ -65,7 +65,8 @@ from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
 )
 
 __all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch",
-           "vfs_step_shared", "same_front_state", "twin_shareable"]
+           "vfs_step_shared", "resolve_pending", "same_front_state",
+           "twin_shareable"]
 
 #: Input row layout of :func:`vfs_step`.
 IN_COLUMNS: tuple[str, ...] = (*JOINT_COLUMNS, *IMU_QUAT, *IMU_GYRO, *IMU_ACC, *CONTACT_REF)
@@ -972,12 +973,20 @@ def same_front_state(mstate, qstate, ci):
     return True
 
 
+#: Floats at the end of a sensor's state: a twin's split inputs kept while its outputs are
+#: not needed (:func:`vfs_step_shared` with ``need`` False), flag first.
+N_PEND = 40
+
+
 @njit_nort
-def vfs_step_shared(x, y, state, cf, ci, ws, iws, mstate, mws):
+def vfs_step_shared(x, y, state, cf, ci, ws, iws, mstate, mws, need):
     """:func:`vfs_step` of a twin sensor on the row the main sensor (state ``mstate``,
     scratch ``mws``) has just processed as a valid sample, taking the main's front of the
     step. Preconditions (the caller's): :func:`twin_shareable` of the two kernels, and
-    :func:`same_front_state` held before the main's step. Returns True."""
+    :func:`same_front_state` held before the main's step. Without ``need`` the stateless
+    end of the step (contact, QP, outputs) is deferred: ``y`` is not written and the
+    split's inputs are kept until :func:`resolve_pending` (the next output or an invalid
+    sample that repeats it). Returns True."""
     prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
         cf, ci)
     nb = ci[0]
@@ -987,32 +996,55 @@ def vfs_step_shared(x, y, state, cf, ci, ws, iws, mstate, mws):
      v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
      tail) = _scratch_views(ws, nq, nb)
     m = _scratch_views(mws, nq, nb)
-    msxp, msxm, mraw = m[8], m[9], m[11]
+    msxp, mraw = m[8], m[11]
     for k in range(1, _S_FRONT_END):
         state[k] = mstate[k]
     a, b = _pose_range(mstate, nb, order)
     for k in range(a, b):
         state[k] = mstate[k]
-    for k in range(8):
-        pk[k, 0] = msxp[1 + k, 0]
-        pk[k, 1] = msxp[1 + k, 1]
-        pk[k, 2] = msxp[1 + k, 2] - corner_radius[k]
     for k in range(9):
         raw[k] = mraw[k]
     sh = _shared_slots(mws)
-    pwt0, pwt1, pwt2, ground = sh[0], sh[1], sh[2], sh[3]
-    com0, com1, com2 = sh[4], sh[5], sh[6]
-    st0 = sh[7] != 0.0
-    st1 = sh[8] != 0.0
-    aw, ax, ay, az = sh[9], sh[10], sh[11], sh[12]
+    com0, com1, com2, ground = sh[4], sh[5], sh[6], sh[3]
     xo = _S_FIXED + 15 * order + 12 * (nb - 1)
     F0, F1, F2, zmp0, zmp1 = _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw, main,
-                                           v3a, v3b, v3c, v3d, aw, ax, ay, az, order,
-                                           prm[_P_G], xo, com0, com1, com2, ground)
-    _split_outputs(y, state, prm, pk, msxp, msxm, tmp8, prior8, rel8, forces, qp_x, qp_z,
-                   qp_M, qp_rhs, qp_dots, iws, tail, pwt0, pwt1, pwt2, ground, com0, com1,
-                   com2, F0, F1, F2, zmp0, zmp1, st0, st1)
+                                           v3a, v3b, v3c, v3d, sh[9], sh[10], sh[11], sh[12],
+                                           order, prm[_P_G], xo, com0, com1, com2, ground)
+    pend = view1d(state, state.shape[0] - N_PEND, N_PEND)
+    for k in range(8):
+        pend[1 + 3 * k] = msxp[1 + k, 0]
+        pend[2 + 3 * k] = msxp[1 + k, 1]
+        pend[3 + 3 * k] = msxp[1 + k, 2] - corner_radius[k]
+    for k in range(9):
+        pend[25 + k] = sh[k]  # pwt, ground, com, stance
+    pend[34], pend[35], pend[36], pend[37], pend[38] = F0, F1, F2, zmp0, zmp1
+    pend[0] = 1.0
+    if need:
+        resolve_pending(y, state, cf, ci, ws, iws)
     return True
+
+
+@njit_nort
+def resolve_pending(y, state, cf, ci, ws, iws):
+    """The deferred end of a twin's step (:func:`vfs_step_shared`), if any, into ``y``
+    and the state's last output."""
+    pend = view1d(state, state.shape[0] - N_PEND, N_PEND)
+    if pend[0] == 0.0:
+        return
+    pend[0] = 0.0
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
+    (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
+     v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+     tail) = _scratch_views(ws, ci[2], ci[0])
+    for k in range(8):
+        pk[k, 0] = pend[1 + 3 * k]
+        pk[k, 1] = pend[2 + 3 * k]
+        pk[k, 2] = pend[3 + 3 * k]
+    _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z,
+                   qp_M, qp_rhs, qp_dots, iws, tail, pend[25], pend[26], pend[27], pend[28],
+                   pend[29], pend[30], pend[31], pend[34], pend[35], pend[36], pend[37],
+                   pend[38], pend[32] != 0.0, pend[33] != 0.0)
 
 
 #: The settings a twin may change without changing the front of the step.
@@ -1127,7 +1159,7 @@ class VFSKernel:
         self.filt_zi = np.ascontiguousarray(np.stack(zs))
         self.order = cfg.filter_order
         nb = tm.nbody
-        self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE)
+        self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE + N_PEND)
         header = np.array([nb, tm.jnt_type.shape[0], tm.nq,
                            tm.site_body.shape[0], self.order], np.int64)
         self.cf = np.ascontiguousarray(np.concatenate([
