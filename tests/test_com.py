@@ -6,8 +6,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from grfguard.estimate.kinematic import KinematicModel, quat_to_matrix
+from grfguard.estimate.kinematic import KinematicModel
 from grfguard.model.robot import SURALP
+from grfguard.rotations import quat_to_matrix
 from reference.vfs_com import (
     CausalLowPass,
     LegOdometry,

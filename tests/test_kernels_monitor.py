@@ -7,7 +7,7 @@ import pandas as pd
 
 from grfguard.detect import Monitor
 from grfguard.faults import inject_faults
-from grfguard.kernels import CompiledVirtualForceSensor, compiled_monitor
+from grfguard.kernels import CompiledVirtualForceSensor
 from grfguard.model.robot import SURALP
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
 
@@ -16,7 +16,7 @@ def test_monitor_run_and_update_match_python_monitor():
     walk = simulate(SURALP, GaitConfig(duration=8.0), NoiseConfig(), seed=5)
     log = inject_faults(walk, "r2=offset:150@5")
     ref = Monitor.for_log(log, compiled=False).run(log)
-    mon = compiled_monitor(log)
+    mon = Monitor.for_log(log)  # the compiled sensor and monitor, kernels warmed up
     assert isinstance(mon.vfs, CompiledVirtualForceSensor)
     out = mon.run(log)
     assert list(out.columns) == list(ref.columns)

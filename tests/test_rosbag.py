@@ -17,13 +17,29 @@ from grfguard.faults import inject_faults
 from grfguard.io import _cdr
 from grfguard.io.bagwrite import write_bag
 from grfguard.io.logio import read_log, write_log
-from grfguard.io.mcap_export import expected_topics
+from grfguard.io.mcap_export import _series_topics, _status_rows
 from grfguard.io.rosbag import EXAMPLE_MAP, BagImportWarning, load_topics_map, read_bag
-from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES
+from grfguard.io.schema import kind_col
+from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, SIDES
 from grfguard.sim import GaitConfig, simulate
 
 runner = CliRunner()
 FAULT = "r2=offset:100@4"
+
+
+def expected_topics(df: pd.DataFrame, status_rate_hz: float = 10.0) -> dict[str, int]:
+    """Topic -> number of messages ``export_mcap`` writes for ``df``."""
+    n = len(df)
+    out = {t: n for t in _series_topics()}
+    for s in SENSOR_NAMES:
+        k = df[kind_col(s)].astype(str).to_numpy()
+        out[f"/grfguard/{s}/kind"] = 1 + int((k[1:] != k[:-1]).sum())
+    for side in SIDES:
+        out[f"/grfguard/{side}/wrench"] = n
+        out[f"/grfguard/{side}/cop"] = n
+    out["/grfguard/com"] = n
+    out["/grfguard/status"] = int(_status_rows(df, status_rate_hz).size)
+    return out
 
 
 @pytest.fixture(scope="module")

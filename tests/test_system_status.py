@@ -58,7 +58,7 @@ def test_exact_model_does_not_blame_the_model(exact):
 
 
 def test_bad_samples_and_config():
-    cm = CommonModeMonitor(SURALP)
+    cm = CommonModeMonitor(SURALP, 0.001)
     r = cm.update([np.nan] * 8, [np.nan] * 8, (True, True))
     assert not r.model_mismatch and np.all(np.isfinite(r.correction_n))
     with pytest.raises(ConfigError, match="time_constant_s"):

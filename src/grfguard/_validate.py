@@ -7,7 +7,7 @@ from typing import Any
 
 from grfguard.errors import ConfigError
 
-__all__ = ["check_number"]
+__all__ = ["check_number", "check_period"]
 
 
 def check_number(
@@ -29,3 +29,19 @@ def check_number(
     if not math.isfinite(value) or not (lo <= value <= hi):
         msg = f"{owner}.{name} = {value!r} {unit} is outside the allowed range [{lo}, {hi}] {unit}"
         raise ConfigError(f"{msg}; {fix}" if fix else msg)
+
+
+def check_period(owner: str, dt_s: Any) -> float:
+    """The sampling period ``dt_s`` as a float [s]; :class:`ConfigError` naming ``owner``
+    unless it is a number in (0, 1) s.
+
+    Real robots log at 100 Hz to 1 kHz: a stage that integrates or filters in time takes
+    the log's period (``MonitorConfig.dt_s`` set by ``config_for_log`` / ``for_log``), never
+    an assumed 1 ms.
+    """
+    if isinstance(dt_s, bool) or not isinstance(dt_s, (int, float)) or not (
+            0.0 < float(dt_s) < 1.0):
+        raise ConfigError(f"{owner}: dt_s = {dt_s!r} must be the log's sampling period, "
+                          "a number in (0, 1) s (e.g. 0.01 for a 100 Hz log; the monitor "
+                          "passes its config.dt_s, set from the log's time column)")
+    return float(dt_s)

@@ -569,19 +569,6 @@ def demo(
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
 
 
-def __getattr__(name: str) -> Any:
-    """Old import paths: ``grfguard.cli.{monitor_config, evaluate_frame, detection_metrics}``."""
-    if name == "monitor_config":
-        from grfguard.config import monitor_config
-
-        return monitor_config
-    if name in ("evaluate_frame", "detection_metrics"):
-        import grfguard.evaluate.frame as frame
-
-        return getattr(frame, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
 
 app.add_typer(robot_app, name="robot")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-__all__ = ["fit_model_corrections", "corrected_log", "corrected_log_and_config"]
+__all__ = ["fit_model_corrections", "corrected_log_and_config"]
 
 
 def fit_model_corrections(
@@ -35,14 +35,6 @@ def fit_model_corrections(
         config = MonitorConfig.from_toml(config)
     return ([apply_corrections(f, corr) for f in frames], "\n" + corr.to_toml(),
             corrected_config(config, corr))
-
-
-def corrected_log(log: Any, thresholds_path: str | Path) -> Any:
-    """``log`` with the ``[model_corrections]`` of the thresholds file applied (unchanged
-    when the file has none)."""
-    from grfguard.calib import ModelCorrections, apply_corrections
-
-    return apply_corrections(log, ModelCorrections.from_toml(thresholds_path))
 
 
 def corrected_log_and_config(log: Any, thresholds_path: str | Path, config: Any) -> Any:

@@ -616,10 +616,7 @@ class Monitor:
         clock, tstate, jump = self.time_guard.step(t_raw)
         reset = self.continuity.before(tstate)
         if reset and self.vfs is not None:
-            if self._can_resync():
-                self._vfs_resync()
-            else:
-                self.vfs.reset()
+            self.vfs.resync()  # forget the finite-difference history only
             if self.vfs_quiet is not None:
                 self.vfs_quiet.reset()
         vout = self._vfs_row(clean)
@@ -796,40 +793,6 @@ class Monitor:
         return all(math.isfinite(q) for q in v) and all(math.isfinite(q) for q in tot)
 
     # ------------------------------------------------------------------ batch
-    def _can_resync(self) -> bool:
-        """The VFS can forget its rate history alone (``resync``); other sensors are reset
-        instead."""
-        return hasattr(self.vfs, "resync")
-
-    def _vfs_resync(self) -> None:
-        """Forget the VFS's finite-difference history (a continuity break)."""
-        self.vfs.resync()
-
-    def _vfs_batch(self, clean: pd.DataFrame, resync: np.ndarray) -> pd.DataFrame:
-        """The VFS over the log, resynced where the streaming monitor resyncs it."""
-        assert self.vfs is not None
-        return self.vfs.run_resynced(clean, resync)
-
-    def _vfs_reset_segments(self, clean: pd.DataFrame, resets: np.ndarray) -> pd.DataFrame:
-        """The VFS over the log, reset (not resynced) at every break."""
-        from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
-
-        assert self.vfs is not None
-        n = len(clean)
-        valid = self.vfs.input_valid(clean)
-        starts = sorted({0, *np.flatnonzero(resets).tolist(), n})
-        parts = []
-        for a, b in zip(starts[:-1], starts[1:], strict=True):
-            seg = clean.iloc[a:b]
-            if valid[a:b].any():
-                parts.append(self.vfs.run(seg))
-            else:  # a reset VFS holds nothing
-                blank = pd.DataFrame(np.nan, index=seg.index, columns=list(VFS_OUTPUT_COLUMNS))
-                blank["vfs_valid"] = 0.0
-                parts.append(blank)
-        self.vfs.reset()
-        return pd.concat(parts)
-
     def run(self, log: pd.DataFrame) -> pd.DataFrame:
         """Reset, then process the whole log; returns ``log`` plus the output columns
         (the same numbers as :meth:`update` row by row).
@@ -877,10 +840,8 @@ class Monitor:
             if not resets.any():
                 vdf = self.vfs.run(clean)
                 self.vfs.reset()
-            elif self._can_resync():
-                vdf = self._vfs_batch(clean, resets)
-            else:
-                vdf = self._vfs_reset_segments(clean, resets)
+            else:  # resynced where the streaming monitor resyncs it
+                vdf = self.vfs.run_resynced(clean, resets)
         vdf, k_vib = self._vibration_frame(clean, vdf, n)
         prep = self._prepare_frame(log, clean, vdf if vdf is not None else clean, times,
                                    reasons, resets)

@@ -1,14 +1,10 @@
 """Rotations and unit quaternions ``(w, x, y, z)``: the one implementation every module uses.
 
 Vectorized functions take (..., 4) quaternions or (...) angles [rad] and return
-(..., 3, 3) matrices (``R_AB`` maps B coordinates to A). The scalar quaternion product
-and exponential serve the per-sample attitude filter, where numpy calls cost more than
-the arithmetic.
+(..., 3, 3) matrices (``R_AB`` maps B coordinates to A).
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -19,12 +15,7 @@ __all__ = [
     "rot_axis",
     "quat_to_matrix",
     "rotation_to_quat",
-    "quat_mul",
-    "quat_exp",
 ]
-
-Quat = tuple[float, float, float, float]
-
 
 def _rot(angle: np.ndarray | float, i: int, j: int) -> np.ndarray:
     """Rotation by ``angle`` [rad] in the plane of axes ``i -> j`` (about the third axis)."""
@@ -94,24 +85,3 @@ def rotation_to_quat(R: np.ndarray) -> np.ndarray:
     z = np.copysign(z, R[..., 1, 0] - R[..., 0, 1])
     q = np.stack([w, x, y, z], -1)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def quat_mul(a: Quat | tuple[float, ...], b: Quat | tuple[float, ...]) -> Quat:
-    """Hamilton product ``a ⊗ b`` of two scalar quaternions."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def quat_exp(x: float, y: float, z: float) -> Quat:
-    """Unit quaternion of the rotation vector ``(x, y, z)`` [rad]."""
-    th = math.sqrt(x * x + y * y + z * z)
-    if th < 1e-12:
-        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
-    s = math.sin(0.5 * th) / th
-    return (math.cos(0.5 * th), s * x, s * y, s * z)

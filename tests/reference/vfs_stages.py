@@ -53,7 +53,7 @@ from grfguard.io.schema import (
     vfs_col,
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
-from grfguard.rotations import quat_exp, quat_mul, quat_to_matrix
+from grfguard.rotations import quat_to_matrix
 from reference.vfs_com import (
     CausalLowPass,
     LegOdometry,
@@ -71,6 +71,30 @@ from reference.vfs_legs import (
     split_with_prior,
     world_to_foot_xy,
 )
+
+Quat = tuple[float, float, float, float]
+
+
+def quat_mul(a: Quat | tuple[float, ...], b: Quat | tuple[float, ...]) -> Quat:
+    """Hamilton product ``a ⊗ b`` of two scalar quaternions."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def quat_exp(x: float, y: float, z: float) -> Quat:
+    """Unit quaternion of the rotation vector ``(x, y, z)`` [rad]."""
+    th = math.sqrt(x * x + y * y + z * z)
+    if th < 1e-12:
+        return (1.0, 0.5 * x, 0.5 * y, 0.5 * z)
+    s = math.sin(0.5 * th) / th
+    return (math.cos(0.5 * th), s * x, s * y, s * z)
+
 
 __all__ = ["PythonVFS", "AttitudeFilter", "angular_momentum_about_com", "forward_batch",
            "rotate_frames"]

@@ -74,12 +74,6 @@ class ResultStore:
             return set()
         return {p.stem for p in self.cells_dir.glob("method=*/kind=*/*.parquet")}
 
-    def failed_ids(self) -> set[str]:
-        """Ids of the cells whose last attempt failed."""
-        if not self.failed_dir.is_dir():
-            return set()
-        return {p.stem for p in self.failed_dir.glob("*.json")}
-
     def write(self, row: Mapping[str, Any]) -> bool:
         """Write one result row atomically; False if the cell was already there."""
         path = self._path(str(row["method"]), str(row["kind"]), str(row["cell_id"]))

@@ -19,31 +19,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 from grfguard.detect.config import MonitorConfig
 from grfguard.detect.tuning import DetectTuning
 
-__all__ = ["Gates", "WeightEstimate", "ContactTimeline"]
+__all__ = ["WeightEstimate", "ContactTimeline"]
 
 _NAN = float("nan")
-
-
-@dataclass(frozen=True)
-class Gates:
-    """Which tests are valid at one sample, per foot (index 0 = right, 1 = left).
-
-    Attributes:
-        contact: The foot is in contact.
-        swing_ok: The swing test is valid.
-        single_support_ok: The corner and foot-total tests are valid.
-        loaded_ok: The constant-reading test is valid.
-    """
-
-    contact: tuple[bool, bool]
-    swing_ok: tuple[bool, bool]
-    single_support_ok: tuple[bool, bool]
-    loaded_ok: tuple[bool, bool]
 
 
 class WeightEstimate:

@@ -33,8 +33,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from grfguard._validate import check_number
-from grfguard.errors import ConfigError
+from grfguard._validate import check_number, check_period
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = ["StandEnd", "StandingConfig", "StandingDetector", "StandingStage"]
@@ -327,11 +326,7 @@ class StandingDetector:
 
 def _check_dt(dt_s: float) -> float:
     """``dt_s`` as a float [s]; ConfigError unless it is a number in (0, 1) s."""
-    if isinstance(dt_s, bool) or not isinstance(dt_s, (int, float)) or not (
-            0.0 < float(dt_s) < 1.0):
-        raise ConfigError(f"standing: dt_s = {dt_s!r} must be the log's sampling period, "
-                          "a number in (0, 1) s (e.g. 0.01 for a 100 Hz log)")
-    return float(dt_s)
+    return check_period("standing", dt_s)
 
 
 def _contact(cref: float, cest: float) -> bool:
@@ -359,17 +354,16 @@ class StandingStage:
     and the kind becomes ``gain``.
 
     Args:
-        dt_s: Sampling period of the log [s]. :class:`~grfguard.detect.Monitor` always
-            passes its ``config.dt_s`` (the log's rate, from ``Monitor.for_log``). The
-            1 ms default is there only for :func:`grfguard.kernels.monitor.warm_monitor`,
-            which builds a stage without a log to compile the kernels; pass the rate.
+        dt_s: Sampling period of the log [s] (required, checked).
+            :class:`~grfguard.detect.Monitor` passes its ``config.dt_s`` (the log's rate,
+            from ``Monitor.for_log``).
         config: Settings of the standing detector.
 
     Raises:
         ConfigError: If ``dt_s`` is not a positive number of seconds.
     """
 
-    def __init__(self, dt_s: float = 0.001, config: StandingConfig | None = None) -> None:
+    def __init__(self, dt_s: float, config: StandingConfig | None = None) -> None:
         self.detector = StandingDetector(dt_s, config)
         tau = self.detector.config.hold_filter_s
         self._a_hold = 1.0 if tau <= 0 else 1.0 - math.exp(-self.detector.dt_s / tau)

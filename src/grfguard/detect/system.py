@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grfguard._validate import check_number
+from grfguard._validate import check_number, check_period
 from grfguard.errors import ConfigError
-from grfguard.model.robot import RobotConfig
+from grfguard.model.robot import SENSOR_NAMES, RobotConfig
 
 __all__ = [
     "CommonModeConfig", "CommonModeMonitor", "CommonModeResult", "SwingZeroConfig",
@@ -113,16 +113,17 @@ class CommonModeMonitor:
 
     Args:
         robot: Robot description (sensor layout, weight).
-        dt_s: Sampling period in [s].
+        dt_s: Sampling period of the log [s] (required, checked: real robots log at
+            100 Hz to 1 kHz; the monitor passes its ``config.dt_s``, the log's rate).
         config: Settings.
     """
 
     def __init__(
-        self, robot: RobotConfig, dt_s: float = 0.001,
+        self, robot: RobotConfig, dt_s: float,
         config: CommonModeConfig | None = None,
     ) -> None:
         self.robot = robot
-        self.dt_s = float(dt_s)
+        self.dt_s = check_period("CommonModeMonitor", dt_s)
         self.config = config if config is not None else CommonModeConfig()
         p = robot.sensor_positions_in_foot()
         self._x = np.concatenate([p[:, 0], p[:, 0]])
@@ -360,16 +361,17 @@ class SwingZeroLearner:
 
     Args:
         robot: Robot description (weight).
-        dt_s: Sampling period in [s].
+        dt_s: Sampling period of the log [s] (required, checked: real robots log at
+            100 Hz to 1 kHz; the monitor passes its ``config.dt_s``, the log's rate).
         config: Settings.
     """
 
     def __init__(
-        self, robot: RobotConfig, dt_s: float = 0.001,
+        self, robot: RobotConfig, dt_s: float,
         config: SwingZeroConfig | None = None,
     ) -> None:
         self.robot = robot
-        self.dt_s = float(dt_s)
+        self.dt_s = check_period("SwingZeroLearner", dt_s)
         self.config = config if config is not None else SwingZeroConfig()
         self.reset()
 
@@ -574,14 +576,15 @@ class AccVibrationDetector:
     :meth:`reset`. The same per-sample arithmetic serves :meth:`update` and :meth:`run`.
 
     Args:
-        dt_s: Sampling period in [s].
+        dt_s: Sampling period of the log [s] (required, checked: real robots log at
+            100 Hz to 1 kHz; the monitor passes its ``config.dt_s``, the log's rate).
         config: Settings.
     """
 
-    def __init__(self, dt_s: float = 0.001, config: VibrationConfig | None = None) -> None:
+    def __init__(self, dt_s: float, config: VibrationConfig | None = None) -> None:
         from scipy.signal import butter
 
-        self.dt_s = float(dt_s)
+        self.dt_s = check_period("AccVibrationDetector", dt_s)
         self.config = config if config is not None else VibrationConfig()
         c = self.config
         wn = min(0.95, 2.0 * c.cutoff_hz * self.dt_s)
@@ -667,12 +670,13 @@ class GyroBiasLearner:
     ``deadband_rad_s`` on some axis.
 
     Args:
-        dt_s: Sampling period in [s].
+        dt_s: Sampling period of the log [s] (required, checked: real robots log at
+            100 Hz to 1 kHz; the monitor passes its ``config.dt_s``, the log's rate).
         config: Settings.
     """
 
-    def __init__(self, dt_s: float = 0.001, config: GyroBiasConfig | None = None) -> None:
-        self.dt_s = float(dt_s)
+    def __init__(self, dt_s: float, config: GyroBiasConfig | None = None) -> None:
+        self.dt_s = check_period("GyroBiasLearner", dt_s)
         self.config = config if config is not None else GyroBiasConfig()
         self.reset()
 
@@ -736,14 +740,15 @@ class ImuTiltLearner:
 
     Args:
         kin: :class:`grfguard.estimate.kinematic.KinematicModel` of the robot.
-        dt_s: Sampling period in [s].
+        dt_s: Sampling period of the log [s] (required, checked: real robots log at
+            100 Hz to 1 kHz; the monitor passes its ``config.dt_s``, the log's rate).
     """
 
-    def __init__(self, kin, dt_s: float = 0.001, learn_s: float = 1.5,
+    def __init__(self, kin, dt_s: float, learn_s: float = 1.5,
                  apply_after_s: float = 0.5, deadband_deg: float = 0.3,
                  every_n: int = 10) -> None:
         self.kin = kin
-        self.dt_s = float(dt_s)
+        self.dt_s = check_period("ImuTiltLearner", dt_s)
         self.learn_s = float(learn_s)
         self.apply_after_s = float(apply_after_s)
         self.deadband_deg = float(deadband_deg)
@@ -852,12 +857,13 @@ class SystemAwareMonitor:
         if robot is None:
             robot = getattr(vfs, "robot", None)
         if robot is None:
-            raise ConfigError("SystemAwareMonitor: no robot description; pass robot= "
-                              "(e.g. grfguard.model.robot.SURALP) or a virtual sensor")
+            raise ConfigError("SystemAwareMonitor: no robot description; pass robot= (a "
+                              "grfguard.model.robot.RobotConfig, e.g. from "
+                              "grfguard.model.robot.load_robot) or a virtual sensor")
         self.inner = Monitor(self.config, vfs=None)
         self.common = CommonModeMonitor(robot, self.config.dt_s, common)
         self.standing = StandingDetector(self.config.dt_s, standing)
-        self._last_flags = [False] * 8
+        self._last_flags = [False] * len(SENSOR_NAMES)
         self._zmp_prev = (math.nan, math.nan)
 
     @classmethod
@@ -876,11 +882,11 @@ class SystemAwareMonitor:
         self.inner.reset()
         self.common.reset()
         self.standing.reset()
-        self._last_flags = [False] * 8
+        self._last_flags = [False] * len(SENSOR_NAMES)
         self._zmp_prev = (math.nan, math.nan)
 
     def _process(self, row: dict, vout: dict) -> dict:
-        from grfguard.model.robot import SENSOR_NAMES, SIDES
+        from grfguard.model.robot import SIDES
 
         src = vout if self.vfs is not None else row
 

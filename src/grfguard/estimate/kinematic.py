@@ -21,9 +21,8 @@ import numpy as np
 
 from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINT_NAMES, SIDES, RobotConfig
-from grfguard.rotations import quat_to_matrix
 
-__all__ = ["KinematicModel", "KinematicFrames", "quat_to_matrix"]
+__all__ = ["KinematicModel", "KinematicFrames"]
 
 
 @dataclass
@@ -34,7 +33,8 @@ class KinematicFrames:
         p_AC: (T, 3) whole-body CoM in frame A [m].
         p_AB: (T, nb, 3) body CoMs in A [m].
         R_WB: (T, nb, 3, 3) body inertia-frame rotations.
-        p_AK: (T, 8, 3) lowest point of each corner sphere in A [m], order r1..r4, l1..l4.
+        p_AK: (T, n_corner, 3) lowest point of each corner sphere in A [m], in the order of
+            ``KinematicModel.corner_sites`` (``r1..r4, l1..l4`` for four cells per sole).
         p_AS: (T, 2, 3) sole-centre sites in A [m], right then left.
         R_WS: (T, 2, 3, 3) sole frame rotations.
         p_AI: (T, 3) IMU site in A [m].
@@ -86,8 +86,6 @@ class KinematicModel:
         self.imu_site = imu
         if int(m.site_bodyid[imu]) != self.trunk_id:
             raise ConfigError("the `imu` site must sit on the `trunk` body")
-        #: Rotation of the IMU site in the trunk frame.
-        self.R_TI = quat_to_matrix(np.array(m.site_quat[imu]))
         q_TI = np.array(m.site_quat[imu], float)
         #: Conjugate of the IMU site quaternion in the trunk: ``q_WT = q_WI (x) q_TI^-1``.
         self._q_IT = np.array([q_TI[0], -q_TI[1], -q_TI[2], -q_TI[3]]) / np.linalg.norm(q_TI)
@@ -113,7 +111,9 @@ class KinematicModel:
         """Kinematics of one sample.
 
         Args:
-            q_rad: (12,) joint angles in JOINT_NAMES order [rad].
+            q_rad: (n,) joint angles [rad], one per model joint in :data:`JOINT_NAMES`
+                order, ``n = len(self.joint_qadr)`` (the joints the model's naming
+                contract lists; no count is assumed here).
             quat_imu_wxyz: (4,) IMU attitude in world.
 
         Returns:

@@ -87,7 +87,14 @@ def _in_columns(cfg: VFSConfig) -> tuple[str, ...]:
 def _robot_from_attrs(attrs: Mapping[str, Any]) -> RobotConfig:
     r = attrs.get("robot") if attrs else None
     if r is None:
-        return RobotConfig()
+        raise LogFormatError(
+            "the log names no robot (log.attrs['robot'] is missing): the virtual force "
+            "sensor needs the robot's description (mass, geometry, sensor layout) and "
+            "never guesses it; set log.attrs['robot'] = RobotConfig(...).to_dict() "
+            "(logs written by grfguard carry it in their metadata), build "
+            "VirtualForceSensor(robot, config) directly, or on the command line pass "
+            "--robot ROBOT.toml or --robot NAME"
+        )
     if isinstance(r, RobotConfig):
         return r
     if isinstance(r, str):
@@ -157,8 +164,13 @@ class VirtualForceSensor:
     def for_log(
         cls, log: pd.DataFrame, config: VFSConfig | None = None, compiled: bool = True
     ) -> VirtualForceSensor:
-        """A sensor for ``log``: robot from ``log.attrs["robot"]`` (SURALP if absent), the
-        sampling period from the ``time`` column."""
+        """A sensor for ``log``: robot from ``log.attrs["robot"]``, the sampling period
+        from the ``time`` column.
+
+        Raises:
+            LogFormatError: If the log's metadata names no robot (``attrs["robot"]``
+                missing) or does not describe one.
+        """
         robot = _robot_from_attrs(getattr(log, "attrs", {}) or {})
         cfg = config if config is not None else VFSConfig()
         if TIME in log.columns and len(log) > 1:

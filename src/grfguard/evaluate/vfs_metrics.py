@@ -25,7 +25,7 @@ from grfguard.errors import LogFormatError
 from grfguard.io.schema import TIME, true_force_col, vfs_col
 from grfguard.model.robot import SENSOR_NAMES, SIDES
 
-__all__ = ["evaluate_vfs", "support_windows", "format_vfs_table"]
+__all__ = ["evaluate_vfs", "support_windows"]
 
 
 def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
@@ -166,23 +166,3 @@ def evaluate_vfs(
     return result
 
 
-def format_vfs_table(rows: Sequence[tuple[str, dict[str, Any]]]) -> str:
-    """Markdown table of ``(label, evaluate_vfs result)`` rows."""
-
-    def g(x: Any) -> str:
-        return "n/a" if x is None else f"{x:.1f}"
-
-    head = (
-        "| run | SS corner RMSE | SS worst corner | SS foot RMSE | SS worst bias "
-        "| DS corner RMSE | DS worst corner | DS foot RMSE | DS worst bias |\n"
-        "|---|---|---|---|---|---|---|---|---|"
-    )
-    lines = [head]
-    for label, r in rows:
-        ss, ds = r["ss"], r["ds"]
-        lines.append(
-            f"| {label} | {g(ss['corner_rmse'])} | {g(ss['corner_rmse_worst'])} | "
-            f"{g(ss['foot_rmse'])} | {g(ss['bias_worst'])} | {g(ds['corner_rmse'])} | "
-            f"{g(ds['corner_rmse_worst'])} | {g(ds['foot_rmse'])} | {g(ds['bias_worst'])} |"
-        )
-    return "\n".join(lines)

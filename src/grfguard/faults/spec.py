@@ -40,7 +40,6 @@ __all__ = [
     "faults_from_toml",
     "faults_to_toml",
     "load_faults",
-    "load_fault_file",
 ]
 
 #: Injectable fault kinds (``none`` and ``unknown`` are classification outputs only).
@@ -264,6 +263,3 @@ def load_faults(path: str | Path) -> list[FaultSpec]:
         raise FaultSpecError(f"fault file {str(p)!r} does not exist")
     return faults_from_toml(p.read_text())
 
-
-#: Alias of :func:`load_faults` (used by ``grfguard inject --faults FILE``).
-load_fault_file = load_faults

@@ -50,7 +50,7 @@ from grfguard.io.schema import (
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES
 
-__all__ = ["export_mcap", "expected_topics", "foxglove_layout"]
+__all__ = ["export_mcap", "foxglove_layout"]
 
 
 def _series_topics() -> dict[str, tuple[str, str]]:
@@ -61,21 +61,6 @@ def _series_topics() -> dict[str, tuple[str, str]]:
         out[f"/grfguard/{s}/vfs"] = ("std_msgs/msg/Float64", vfs_col(s))
         out[f"/grfguard/{s}/recovered"] = ("std_msgs/msg/Float64", recovered_col(s))
         out[f"/grfguard/{s}/flag"] = ("std_msgs/msg/Bool", flag_col(s))
-    return out
-
-
-def expected_topics(df: pd.DataFrame, status_rate_hz: float = 10.0) -> dict[str, int]:
-    """Topic -> number of messages :func:`export_mcap` writes for ``df``."""
-    n = len(df)
-    out = {t: n for t in _series_topics()}
-    for s in SENSOR_NAMES:
-        k = df[kind_col(s)].astype(str).to_numpy()
-        out[f"/grfguard/{s}/kind"] = 1 + int((k[1:] != k[:-1]).sum())
-    for side in SIDES:
-        out[f"/grfguard/{side}/wrench"] = n
-        out[f"/grfguard/{side}/cop"] = n
-    out["/grfguard/com"] = n
-    out["/grfguard/status"] = int(_status_rows(df, status_rate_hz).size)
     return out
 
 

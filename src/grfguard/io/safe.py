@@ -18,7 +18,7 @@ import errno
 import os
 import stat
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -28,8 +28,6 @@ __all__ = [
     "atomic_path",
     "atomic_open",
     "atomic_write_text",
-    "atomic_write_bytes",
-    "atomic_call",
     "check_output",
     "check_output_dir",
     "same_file",
@@ -197,19 +195,6 @@ def atomic_write_text(path: str | Path, text: str, what: str = "output",
     with atomic_open(path, "w", what=what, encoding=encoding, newline="") as fh:
         fh.write(text)
     return Path(path)
-
-
-def atomic_write_bytes(path: str | Path, data: bytes, what: str = "output") -> Path:
-    """Write ``data`` to ``path`` atomically; returns ``path``."""
-    with atomic_open(path, "wb", what=what) as fh:
-        fh.write(data)
-    return Path(path)
-
-
-def atomic_call(path: str | Path, writer: Callable[[Path], Any], what: str = "output") -> Any:
-    """Call ``writer(tmp_path)`` and move the result to ``path`` atomically."""
-    with atomic_path(path, what) as tmp:
-        return writer(tmp)
 
 
 def _unlink(p: Path) -> None:

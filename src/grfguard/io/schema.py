@@ -28,7 +28,6 @@ __all__ = [
     "flag_col",
     "kind_col",
     "recovered_col",
-    "FOOT_OUTPUT_COLUMNS",
     "COM_EST_COLUMNS",
     "FAULT_KINDS",
 ]
@@ -110,10 +109,6 @@ TRUE_COLUMNS = (
 #: Columns every input log must have for the virtual sensor and the monitor.
 REQUIRED_INPUT_COLUMNS = (TIME, *IMU_ACC, *IMU_GYRO, *IMU_QUAT, *JOINT_COLUMNS, *FORCE_COLUMNS)
 
-#: Per-foot outputs of ``grfguard run``: total vertical force [N], CoP in world [m].
-FOOT_OUTPUT_COLUMNS = tuple(
-    f"{name}_{s}" for s in SIDES for name in ("vfs_total", "vfs_cop_x", "vfs_cop_y")
-)
 COM_EST_COLUMNS = ("com_est_x", "com_est_y", "com_est_z")
 
 #: Fault kinds known to injection and classification.

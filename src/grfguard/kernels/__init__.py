@@ -6,7 +6,6 @@ as one step function over plain arrays, streamed sample by sample or looped over
   ``update_array``) whenever it covers the settings. ``CompiledVirtualForceSensor`` is
   an old name of that class.
 * :func:`vfs_batch`: compiled ``VirtualForceSensor.for_log(log).run(log)``.
-* :func:`compiled_monitor`: ``Monitor.for_log`` with the compiled sensor inside.
 * :func:`warm_up`: compile or load the cache before the first sample.
 
 Array layouts: :data:`IN_COLUMNS`, :data:`OUT_COLUMNS` (:mod:`grfguard.kernels.vfs`).
@@ -15,7 +14,6 @@ Array layouts: :data:`IN_COLUMNS`, :data:`OUT_COLUMNS` (:mod:`grfguard.kernels.v
 from __future__ import annotations
 
 from grfguard.kernels.fk import TreeModel, fk_sites, fk_tree
-from grfguard.kernels.monitor import compiled_monitor
 from grfguard.kernels.vfs import (
     IN_COLUMNS,
     OUT_COLUMNS,
@@ -30,5 +28,4 @@ from grfguard.kernels.warmup import warm_up
 __all__ = [
     "TreeModel", "fk_tree", "fk_sites", "IN_COLUMNS", "OUT_COLUMNS",
     "CompiledVirtualForceSensor", "VFSKernel", "vfs_batch", "vfs_run", "vfs_step", "warm_up",
-    "compiled_monitor",
 ]

@@ -90,10 +90,9 @@ from grfguard.kernels.vfs import (
     twin_shareable,
     vfs_step,
 )
-from grfguard.kernels.warmup import warm_up
 from grfguard.model.robot import SENSOR_NAMES, SIDES
 
-__all__ = ["compiled_monitor", "input_columns", "output_columns", "monitor_step",
+__all__ = ["input_columns", "output_columns", "monitor_step",
            "monitor_run", "MonitorKernel", "update_dict", "run_frame", "dict_to_row",
            "warm_monitor", "monitor_step_packed", "monitor_run_packed"]
 
@@ -548,26 +547,7 @@ def monitor_run_packed(X, Y, EX, F, I):
                      viws, xc, vy, ws, sy)
 
 
-def compiled_monitor(log: pd.DataFrame, config: Any = None, warm: bool = True) -> Any:
-    """``Monitor.for_log(log, config)`` (whose virtual force sensor is the compiled one
-    whenever the kernel covers the settings), kept for its old callers.
-
-    Args:
-        log: A log of the contract (robot and sampling period are read from it).
-        config: A :class:`~grfguard.detect.MonitorConfig` (default settings if None).
-        warm: Compile or load the kernels now (:func:`warm_up`) instead of at the first
-            sample.
-    """
-    from grfguard.detect import Monitor
-
-    mon = Monitor.for_log(log, config)
-    if warm and getattr(mon.vfs, "compiled", False):
-        warm_up()
-    return mon
-
 # ---------------------------------------------------------------- Monitor glue
-_KIND_OBJ = np.array(KIND_NAMES, dtype=object)
-_STATE_OBJ = np.array(SYSTEM_STATES, dtype=object)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
@@ -758,12 +738,15 @@ def warm_monitor() -> None:
     from grfguard.kernels.detect import detect_params
     from grfguard.model.robot import RobotConfig
 
-    prm = detect_params(MonitorConfig())
+    # No log here: the kernels compile for the argument types, so the reference robot and
+    # the config's period serve (a monitor built for a log passes the log's rate).
+    cfg = MonitorConfig()
+    prm = detect_params(cfg)
     guard = InputGuard(RobotConfig())
     from grfguard.detect.standing import StandingStage
 
     for vk in (None, VFSKernel(VirtualForceSensor())):
-        k = MonitorKernel(prm, guard, vk, StandingStage())
+        k = MonitorKernel(prm, guard, vk, StandingStage(cfg.dt_s))
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))
         k.run(x[None, :])

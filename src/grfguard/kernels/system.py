@@ -41,6 +41,7 @@ from grfguard.kernels.fk import fk_sites
 from grfguard.kernels.standing import _STAGE as SD_STAGE
 from grfguard.kernels.standing import _det_reset
 from grfguard.kernels.vfs import (
+    _NJ,
     _S_ANCHOR,
     _kinematics,
     _scratch_views,
@@ -236,7 +237,7 @@ def _tilt(yp, ys, xc, dt, cf, ci, vws, viws):
         return
     iq = int(yp[Y_I_Q])
     iw = int(yp[Y_I_QUAT])
-    for j in range(12):
+    for j in range(_NJ):
         if not math.isfinite(xc[iq + j]):
             return
     for j in range(4):

@@ -73,8 +73,19 @@ IN_COLUMNS: tuple[str, ...] = (*JOINT_COLUMNS, *IMU_QUAT, *IMU_GYRO, *IMU_ACC, *
 #: Input row layout with the paper's CoM filter: :data:`IN_COLUMNS`, the force sensors
 #: ``force_r1..force_l4`` [N] and the planned ZMP ``zmp_ref_x/y`` [m] (NaN: not used).
 PAPER_IN_COLUMNS: tuple[str, ...] = (*IN_COLUMNS, *FORCE_COLUMNS, *ZMP_REF)
-_I_Q, _I_QUAT, _I_GYRO, _I_ACC, _I_REF = 0, 12, 16, 19, 22
-N_IN = 24
+#: Joints of the input row: the schema's ``JOINT_COLUMNS`` (the leg joints of grfguard's
+#: MJCF naming contract, which this compiled sensor reads; robots described by a URDF or
+#: MJCF of their own go through :mod:`grfguard.estimate.wrench`, which takes every joint).
+_NJ = len(JOINT_COLUMNS)
+#: Corner cells: the schema's ``FORCE_COLUMNS`` (four per sole).
+_NC = len(FORCE_COLUMNS)
+_I_Q = 0
+_I_QUAT = _I_Q + _NJ
+_I_GYRO = _I_QUAT + len(IMU_QUAT)
+_I_ACC = _I_GYRO + len(IMU_GYRO)
+_I_REF = _I_ACC + len(IMU_ACC)
+N_IN = _I_REF + len(CONTACT_REF)
+assert N_IN == len(IN_COLUMNS)
 N_OUT = 22
 
 # float parameters (prm)
@@ -83,8 +94,11 @@ _P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10
 _P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
 N_PRM = 40  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
 # int parameters (iprm)
-_IP_TRUNK, _IP_ROOT, _IP_JOINTS, _IP_IMU, _IP_CORNERS, _IP_SOLES = 0, 1, 2, 14, 15, 23
-N_IPRM = 25
+_IP_TRUNK, _IP_ROOT, _IP_JOINTS = 0, 1, 2
+_IP_IMU = _IP_JOINTS + _NJ
+_IP_CORNERS = _IP_IMU + 1
+_IP_SOLES = _IP_CORNERS + _NC
+N_IPRM = _IP_SOLES + 2
 # state layout (fixed part)
 _S_N, _S_ATT_INIT, _S_ATT = 0, 1, 2  # att: 2..5
 _S_ANCHOR, _S_PWA = 6, 7  # p_W_anchor: 7..9
@@ -305,7 +319,7 @@ def _valid_sample(x, y, state, prm):
     if ok and prm[P_COM_PAPER] != 0.0:  # vfs_paper: acc and force sensors too
         ok = valid_paper_inputs(x)
     if ok:
-        qw, qx, qy, qz = x[12], x[13], x[14], x[15]
+        qw, qx, qy, qz = x[_I_QUAT], x[_I_QUAT + 1], x[_I_QUAT + 2], x[_I_QUAT + 3]
         if math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) < 1e-6:
             ok = False
     if not ok:
@@ -391,7 +405,7 @@ def _scratch_views(ws, nq, nb):
 def _attitude_filter(x, state, prm):
     """Complementary attitude filter (gyro prediction pulled towards the measured
     quaternion by ``katt``); returns and stores the unit attitude (w, x, y, z)."""
-    qw, qx, qy, qz = x[12], x[13], x[14], x[15]
+    qw, qx, qy, qz = x[_I_QUAT], x[_I_QUAT + 1], x[_I_QUAT + 2], x[_I_QUAT + 3]
     nm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
     mw, mx, my, mz = qw / nm, qx / nm, qy / nm, qz / nm
     katt = prm[_P_KATT]
@@ -445,8 +459,8 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     qin[r + 4] = tx
     qin[r + 5] = ty
     qin[r + 6] = tz
-    for j in range(12):
-        qin[iprm[_IP_JOINTS + j]] = x[j]
+    for j in range(_NJ):
+        qin[iprm[_IP_JOINTS + j]] = x[_I_Q + j]
     # fk_tree's bodies, then the subtree CoM of the trunk only (same bits)
     fk_bodies(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
               body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
@@ -1138,9 +1152,9 @@ class VFSKernel:
         ip = np.zeros(N_IPRM, np.int64)
         ip[_IP_TRUNK] = kin.trunk_id
         ip[_IP_ROOT] = kin.root_qadr
-        ip[_IP_JOINTS : _IP_JOINTS + 12] = kin.joint_qadr
+        ip[_IP_JOINTS : _IP_JOINTS + _NJ] = kin.joint_qadr
         ip[_IP_IMU] = kin.imu_site
-        ip[_IP_CORNERS : _IP_CORNERS + 8] = kin.corner_sites
+        ip[_IP_CORNERS : _IP_CORNERS + _NC] = kin.corner_sites
         ip[_IP_SOLES : _IP_SOLES + 2] = kin.sole_sites
         self.iprm = ip
         self.body_inertia = np.ascontiguousarray(kin.body_inertia, dtype=float)

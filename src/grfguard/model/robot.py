@@ -186,11 +186,6 @@ class RobotConfig:
         hy = self.foot_width / 2 - self.sensor_inset
         return np.array([[hx, hy], [hx, -hy], [-hx, hy], [-hx, -hy]], dtype=float)
 
-    def sole_polygon_in_foot(self) -> np.ndarray:
-        """(2, 2) array ``[[x_min, x_max], [y_min, y_max]]`` of the sensor rectangle [m]."""
-        p = self.sensor_positions_in_foot()
-        return np.array([[p[:, 0].min(), p[:, 0].max()], [p[:, 1].min(), p[:, 1].max()]])
-
     # ---------------------------------------------------------------- TOML round trip
     def to_dict(self) -> dict[str, Any]:
         """Plain dict of the parameters (``extra`` merged in)."""

@@ -37,7 +37,7 @@ import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.io.logio import to_jsonable
-from grfguard.report._decimate import minmax_indices, step_edges, window_mask
+from grfguard.report._decimate import intervals, minmax_indices, step_edges, window_mask
 from grfguard.report.style import (
     ALARM_COLOR,
     CONTACT_SHADE,
@@ -82,13 +82,6 @@ def _sensor_title(sensor: str) -> str:
     except ValueError:
         corner = sensor
     return f"{sensor}: {side} foot, {corner}"
-
-
-def _intervals_from_mask(t: np.ndarray, m: np.ndarray) -> list[tuple[float, float]]:
-    d = np.diff(m.astype(np.int8), prepend=0, append=0)
-    a = np.flatnonzero(d == 1)
-    b = np.flatnonzero(d == -1)
-    return [(float(t[i]), float(t[min(j, t.size - 1)])) for i, j in zip(a, b, strict=True)]
 
 
 def _line_trace(
@@ -217,7 +210,7 @@ def _sensor_shapes(df: pd.DataFrame, t: np.ndarray, s: str) -> tuple[list[dict[s
     and a title note when the caps cut marks."""
     shapes: list[dict[str, Any]] = []
     fm = fault_mask(df, s)
-    windows = _intervals_from_mask(t, fm) if fm is not None and fm.any() else []
+    windows = intervals(t, fm) if fm is not None and fm.any() else []
     for i, (a, b) in enumerate(windows[:MAX_FAULT_WINDOWS]):
         shapes.append(
             {
@@ -363,12 +356,12 @@ def _timeline_spec(df: pd.DataFrame, t: np.ndarray, sensors: list[str]) -> dict[
         y = n - 1 - i
         fm = fault_mask(df, s)
         if fm is not None and fm.any():
-            xs, ys = _polygons(_intervals_from_mask(t, fm), y, 0.42)
+            xs, ys = _polygons(intervals(t, fm), y, 0.42)
             fx += xs
             fy += ys
         if f"flag_{s}" in df.columns:
             fl = df[f"flag_{s}"].fillna(False).to_numpy().astype(bool)
-            xs, ys = _polygons(_intervals_from_mask(t, fl), y, 0.2)
+            xs, ys = _polygons(intervals(t, fl), y, 0.2)
             ax_ += xs
             ay += ys
     data: list[dict[str, Any]] = []
