@@ -138,7 +138,8 @@ def table(s: dict[str, float], t: dict[str, float], ref_us: float) -> list[str]:
             f"{s['run_wall']:.2f} µs = {1e6 / s['run_wall']:,.0f}/s)", rc, rc),
         row("SURALP", "compiled monitor loop (`MonitorKernel.run`)", s["kernel"], rc),
         row("SURALP", "of which the virtual force sensor (`vfs_run`)", s["vfs"], rc),
-        row("SURALP", "of which guards, detector, recovery, standing (difference)",
+        row("SURALP", "of which guards, twin sensor, system layer, detector, recovery, "
+            "standing (difference)",
             max(s["kernel"] - s["vfs"], 1e-3), rc),
         row("SURALP", "columns in, output frame (difference)",
             max(rc - s["kernel"], 1e-3), rc),
