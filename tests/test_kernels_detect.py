@@ -20,7 +20,7 @@ from grfguard.detect import Monitor, MonitorConfig
 from grfguard.detect.detector import Detector, DetectorInputs
 from grfguard.estimate.vfs import with_vfs_columns
 from grfguard.faults import inject_faults
-from grfguard.kernels.detect import KIND_NAMES, DetectKernel, detect_params, sensor_states
+from grfguard.kernels.detect import KIND_NAMES, DetectKernel, detect_params
 from grfguard.model.robot import SENSOR_NAMES, SURALP
 from grfguard.recover.recovery import Recovery
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
@@ -36,6 +36,43 @@ SCENARIOS = {
     "fault-free": [],
     "quantised 0.5 N": ["l1=frozen:0@5.2"],
 }
+
+
+def sensor_states(ss: np.ndarray) -> list:
+    """The per-sensor state ``ss`` as :class:`~grfguard.detect.sensor_state.SensorState`
+    objects (what ``Detector.sensors`` would hold), to compare the compiled state with
+    the Python one."""
+    from grfguard.detect.sensor_state import SensorState
+    from grfguard.kernels import detect as K
+
+    out = []
+    for row in ss:
+        s = SensorState()
+        s.last_reading_n = float(row[K.LAST])
+        s.repeats = int(row[K.REP])
+        s.pairs, s.chance_repeats = int(row[K.PAIRS]), int(row[K.CHANCE])
+        s.run_pairs, s.run_repeats = int(row[K.RUNP]), int(row[K.RUNR])
+        s.swing_pos, s.swing_neg = float(row[K.SWP]), float(row[K.SWN])
+        s.corner_pos, s.corner_neg = float(row[K.CP]), float(row[K.CN])
+        s.flag = bool(row[K.FLAG])
+        s.source = K.SOURCE_NAMES[int(row[K.SRC])]
+        s.kind = K.KIND_NAMES[int(row[K.KIND])]
+        s.flag_time_s, s.last_alarm_s = float(row[K.FT]), float(row[K.LA])
+        s.quiet_valid = int(row[K.QV])
+        s.eta_n, s.gain, s.const_value_n = float(row[K.ETA]), float(row[K.GAIN]), float(row[K.CV])
+        s.varied, s.const_returns = bool(row[K.VAR]), int(row[K.CR])
+        w = s.swing
+        w.n, w.outliers = int(row[K.FN]), int(row[K.FOUT])
+        w.sum_t, w.sum_x, w.sum_tt = float(row[K.FST]), float(row[K.FSX]), float(row[K.FSTT])
+        w.sum_tx, w.sum_xx = float(row[K.FSTX]), float(row[K.FSXX])
+        st = s.stance
+        st.n = int(row[K.SN])
+        st.sum_load, st.sum_res = float(row[K.SL]), float(row[K.SR])
+        st.sum_load2 = float(row[K.SLL])
+        st.sum_load_res, st.sum_res2 = float(row[K.SLR]), float(row[K.SRR])
+        st.eta_n = float(row[K.SETA])
+        out.append(s)
+    return out
 
 
 @pytest.fixture(scope="module")

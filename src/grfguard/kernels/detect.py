@@ -34,7 +34,7 @@ from grfguard.kernels._jit import njit, njit_nort
 
 __all__ = [
     "KIND_NAMES", "SOURCE_NAMES", "N_SS", "N_GS", "N_PRM", "detect_params", "detect_step",
-    "detect_run", "new_state", "reset_state", "time_guard_run", "DetectKernel", "sensor_states",
+    "detect_run", "new_state", "reset_state", "time_guard_run", "DetectKernel",
 ]
 
 _NAN = math.nan
@@ -919,36 +919,3 @@ class DetectKernel:
                    c(v, dtype=float), c(tot, dtype=float), c(cref, dtype=float),
                    c(cest, dtype=float), c(gap, dtype=np.bool_), rec, eta, flag, kind)
         return flag, kind, eta, rec
-
-
-def sensor_states(ss: np.ndarray) -> list:
-    """The per-sensor state ``ss`` as :class:`~grfguard.detect.sensor_state.SensorState`
-    objects (what ``Detector.sensors`` would hold)."""
-    from grfguard.detect.sensor_state import SensorState
-
-    out = []
-    for row in ss:
-        s = SensorState()
-        s.last_reading_n = float(row[LAST])
-        s.repeats = int(row[REP])
-        s.pairs, s.chance_repeats = int(row[PAIRS]), int(row[CHANCE])
-        s.run_pairs, s.run_repeats = int(row[RUNP]), int(row[RUNR])
-        s.swing_pos, s.swing_neg = float(row[SWP]), float(row[SWN])
-        s.corner_pos, s.corner_neg = float(row[CP]), float(row[CN])
-        s.flag = bool(row[FLAG])
-        s.source = SOURCE_NAMES[int(row[SRC])]
-        s.kind = KIND_NAMES[int(row[KIND])]
-        s.flag_time_s, s.last_alarm_s = float(row[FT]), float(row[LA])
-        s.quiet_valid = int(row[QV])
-        s.eta_n, s.gain, s.const_value_n = float(row[ETA]), float(row[GAIN]), float(row[CV])
-        s.varied, s.const_returns = bool(row[VAR]), int(row[CR])
-        w = s.swing
-        w.n, w.outliers = int(row[FN]), int(row[FOUT])
-        w.sum_t, w.sum_x, w.sum_tt = float(row[FST]), float(row[FSX]), float(row[FSTT])
-        w.sum_tx, w.sum_xx = float(row[FSTX]), float(row[FSXX])
-        st = s.stance
-        st.n = int(row[SN])
-        st.sum_load, st.sum_res, st.sum_load2 = float(row[SL]), float(row[SR]), float(row[SLL])
-        st.sum_load_res, st.sum_res2, st.eta_n = float(row[SLR]), float(row[SRR]), float(row[SETA])
-        out.append(s)
-    return out

@@ -35,7 +35,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from grfguard.errors import ConfigError, LogFormatError
+from grfguard.errors import LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import (
     CONTACT_REF,
@@ -1109,17 +1109,10 @@ class VFSKernel:
             MuJoCo model are taken from it).
         has_gyro: The input carries the gyro (else the logged attitude is used as is).
         has_ref: The input carries the planned contact (else the lowest-foot fallback).
-
-    Raises:
-        ConfigError: The settings are not covered (see :meth:`supports`).
     """
 
     def __init__(self, vfs, has_gyro: bool = True, has_ref: bool = True) -> None:
         cfg: VFSConfig = vfs.config
-        why = self.unsupported(cfg)
-        if why:
-            raise ConfigError(f"the compiled virtual force sensor does not support {why}; "
-                              "use grfguard.estimate.vfs.VirtualForceSensor")
         kin = vfs.kin
         self.config = cfg
         self.tree = TreeModel.from_mujoco(kin.model)
@@ -1191,17 +1184,6 @@ class VFSKernel:
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
         self.iws = np.zeros(64, np.int64)
         self.reset()
-
-    @staticmethod
-    def unsupported(cfg: VFSConfig) -> str:
-        """Empty when ``cfg`` is covered, else which setting is not (every
-        :class:`VFSConfig` is)."""
-        return ""
-
-    @classmethod
-    def supports(cls, cfg: VFSConfig) -> bool:
-        """Whether :class:`VFSKernel` covers these settings."""
-        return not cls.unsupported(cfg)
 
     def reset(self) -> None:
         """Forget all state (as ``VirtualForceSensor.reset``)."""

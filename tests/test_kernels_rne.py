@@ -1,0 +1,193 @@
+"""Compiled inverse dynamics (grfguard.kernels.rne) against MuJoCo on random states of the
+shipped described robots (Talos: ankle F/T, G1: corner cells) and of a small model with
+ball and slide joints; the compiled virtual foot wrenches against the per-sample MuJoCo
+path on simulated walks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+from grfguard.errors import ConfigError  # noqa: E402
+from grfguard.estimate.wrench import _share  # noqa: E402
+from grfguard.kernels.rne import RNEModel, new_work, rne_sample, sample_wrenches  # noqa: E402
+from grfguard.model.description import SIDES, load_description  # noqa: E402
+from grfguard.model.loader import load_model  # noqa: E402
+
+BALL_SLIDE_XML = """
+<mujoco>
+  <option gravity="0.3 -0.2 -9.81"/>
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint/>
+      <geom type="box" size="0.1 0.2 0.05" mass="5"/>
+      <body name="arm" pos="0.1 0.2 0" quat="0.9 0.1 0.3 0.2">
+        <joint name="ball" type="ball" pos="0.01 0.02 0.03" armature="0.1"/>
+        <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1.3"/>
+        <body name="slider" pos="0.3 0 0">
+          <joint name="slide" type="slide" axis="0.2 0.5 0.8" armature="0.2" damping="3"/>
+          <geom type="sphere" size="0.04" pos="0.02 0.01 0" mass="0.7"/>
+          <site name="tip" pos="0.05 0 0.01" quat="0.7 0.7 0 0"/>
+        </body>
+      </body>
+      <body name="leg" pos="0 -0.1 -0.1">
+        <joint name="hinge" type="hinge" axis="0.3 1 0.1" pos="0 0 0.02" armature="0.05"/>
+        <geom type="box" size="0.03 0.04 0.2" pos="0.01 0 -0.2" mass="2"/>
+        <site name="foot" pos="0 0 -0.4"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+@pytest.fixture(scope="module")
+def talos():
+    return load_model(load_description("talos"))
+
+
+@pytest.fixture(scope="module")
+def g1():
+    return load_model(load_description("g1"))
+
+
+def _random_state(m, rng):
+    qpos = m.qpos0.copy()
+    for j in range(m.njnt):
+        a, t = m.jnt_qposadr[j], m.jnt_type[j]
+        if t == mujoco.mjtJoint.mjJNT_FREE:
+            qpos[a:a + 3] = rng.normal(0, 0.3, 3)
+            q = rng.normal(size=4)
+            qpos[a + 3:a + 7] = q / np.linalg.norm(q)
+        elif t == mujoco.mjtJoint.mjJNT_BALL:
+            q = rng.normal(size=4)
+            qpos[a:a + 4] = q / np.linalg.norm(q)
+        else:
+            qpos[a] = rng.uniform(-1.0, 1.0)
+    return qpos, rng.normal(0, 1.0, m.nv), rng.normal(0, 5.0, m.nv)
+
+
+def _mujoco_reference(m, d, qpos, qvel, qacc, site_ids, feet, ground=None, ft_sites=None):
+    """f_free (mj_rne), the sole wrenches alone (J_free^T w = f_free) and, with ``ground``,
+    the F/T readings (mj_rnePostConstraint), as grfguard.estimate.wrench computes them."""
+    d.qpos[:], d.qvel[:], d.qacc[:] = qpos, qvel, qacc
+    d.xfrc_applied[:] = 0.0
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    mujoco.mj_comVel(m, d)
+    f = np.zeros(m.nv)
+    mujoco.mj_rne(m, d, 1, f)
+    jac = np.zeros((6, m.nv))
+    alone = []
+    for sid in site_ids:
+        mujoco.mj_jacSite(m, d, jac[:3], jac[3:], sid)
+        alone.append(np.linalg.solve(jac[:, :6].T, f[:6]))
+    if ground is None:
+        return f[:6], np.array(alone), None
+    from grfguard.estimate.wrench import _ft_readings
+
+    class _R:  # the minimal LoadedRobot _ft_readings reads
+        model = m
+
+    out = np.zeros((2, 6))
+    ids = (list(feet), list(site_ids), list(ft_sites), [1, 1])
+    _ft_readings(_R, d, ground, out, ids)
+    return f[:6], np.array(alone), out
+
+
+def _kernel(rm, qpos, qvel, qacc, sites, feet, w, ft):
+    work = new_work(rm, len(sites))
+    rne_sample(qpos, qvel, qacc, rm.tree.arrays(), rm.site_arrays(), rm.dyn_arrays(),
+               np.asarray(sites, np.int64), work)
+    ground, ft_out = np.zeros((2, 6)), np.zeros((2, 6))
+    sample_wrenches(w[0], w[1], rm.root, np.asarray(feet, np.int64), ft, work, ground, ft_out)
+    return work, ground, ft_out
+
+
+def _free_rows(m, work):
+    """The free-base generalized force from the kernel's subtree force (cdof^T cfrc)."""
+    d = mujoco.MjData(m)
+    d.qpos[:] = work[0]
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    return d.cdof[:6] @ work[12][1]
+
+
+@pytest.mark.parametrize("name", ["talos", "g1"])
+def test_inverse_dynamics_matches_mujoco(name, request) -> None:
+    robot = request.getfixturevalue(name)
+    m = robot.model
+    d = mujoco.MjData(m)
+    rm = RNEModel.from_mujoco(m)
+    soles = [m.site(f"{s}_sole").id for s in SIDES]
+    feet = [m.body(f.body).id for f in robot.description.feet]
+    ft = robot.description.sensing == "ft"
+    fts = [m.site(f"{s}_ft").id for s in SIDES] if ft else []
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        qpos, qvel, qacc = _random_state(m, rng)
+        w = (1.0, 0.0) if trial % 3 == 0 else ((0.0, 1.0) if trial % 3 == 1 else (0.5, 0.5))
+        work, ground, ft_out = _kernel(rm, qpos, qvel, qacc, soles + fts, feet, w, ft)
+        f_ref, alone, _ = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet)
+        scale = max(1.0, np.abs(f_ref).max())
+        assert np.abs(_free_rows(m, work) - f_ref).max() < 1e-9 * scale
+        np.testing.assert_allclose(work[13][:2], d.site_xpos[soles], rtol=0, atol=1e-12)
+        # load shares as grfguard.estimate.wrench._share takes them (CoP in double support)
+        share = _share(np.array(w), alone, d.site_xpos[soles[0]], d.site_xpos[soles[1]])
+        assert np.abs(ground - share[:, None] * alone).max() < 1e-9 * scale
+        if ft:
+            _, _, ft_ref = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet, ground, fts)
+            assert np.abs(ft_out - ft_ref).max() < 1e-9 * scale
+
+
+def test_ball_slide_model_matches_mujoco() -> None:
+    m = mujoco.MjModel.from_xml_string(BALL_SLIDE_XML)
+    d = mujoco.MjData(m)
+    rm = RNEModel.from_mujoco(m)
+    soles = [m.site("tip").id, m.site("foot").id]
+    feet = [m.body("slider").id, m.body("leg").id]
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        qpos, qvel, qacc = _random_state(m, rng)
+        ground = rng.normal(0, 20.0, (2, 6))
+        work, g, ft_out = _kernel(rm, qpos, qvel, qacc, soles + soles, feet, (1.0, 0.0), True)
+        f_ref, alone, _ = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet)
+        assert np.abs(_free_rows(m, work) - f_ref).max() < 1e-9 * max(1, np.abs(f_ref).max())
+        assert np.abs(g[0] - alone[0]).max() < 1e-9 * max(1.0, np.abs(alone).max())
+        # F/T of both "feet" under the kernel's own ground wrench (tip, foot: its site)
+        _, _, ft_ref = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet, g, soles)
+        assert np.abs(ft_out - ft_ref).max() < 1e-9 * max(1.0, np.abs(ft_ref).max())
+        assert ground.shape == (2, 6)
+
+
+def test_unsupported_models_are_named() -> None:
+    fixed = BALL_SLIDE_XML.replace("<freejoint/>", "")
+    with pytest.raises(ConfigError, match="free joint"):
+        RNEModel.from_mujoco(mujoco.MjModel.from_xml_string(fixed))
+    two = BALL_SLIDE_XML.replace(
+        '<joint name="hinge" type="hinge" axis="0.3 1 0.1" pos="0 0 0.02" armature="0.05"/>',
+        '<joint name="hinge" type="hinge" axis="0.3 1 0.1"/><joint name="h2" axis="1 0 0"/>')
+    with pytest.raises(ConfigError, match="one joint per body"):
+        RNEModel.from_mujoco(mujoco.MjModel.from_xml_string(two))
+
+
+@pytest.mark.parametrize("name", ["talos", "g1"])
+def test_estimate_wrenches_compiled_equals_mujoco_path(name, request) -> None:
+    """The compiled batch path gives today's (per-sample MuJoCo) virtual wrenches to 1e-9 N
+    on a noisy simulated walk (double support, swing and the ``leveled`` attitude in)."""
+    from grfguard.estimate.wrench import estimate_wrenches
+    from grfguard.sim.config import NoiseConfig
+    from grfguard.sim.wholebody import scaled_gait, simulate_robot
+
+    robot = request.getfixturevalue(name)
+    df = simulate_robot(robot, scaled_gait(robot, duration=2.5), NoiseConfig(), seed=4)
+    new = estimate_wrenches(df, robot)
+    old = estimate_wrenches(df, robot, compiled=False)
+    assert np.abs(new.ground[:, :, 2]).max() > 0.5 * robot.mass * 9.81  # carries the weight
+    assert np.abs(new.ground - old.ground).max() < 1e-9
+    assert new.sensor.keys() == old.sensor.keys()
+    for k in new.sensor:
+        assert np.abs(new.sensor[k] - old.sensor[k]).max() < 1e-9, k
+    np.testing.assert_array_equal(new.contact, old.contact)
