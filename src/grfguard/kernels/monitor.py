@@ -619,7 +619,7 @@ def _column(log: pd.DataFrame, c: str) -> np.ndarray:
         return pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
 
 
-def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 15
+def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 12
               ) -> pd.DataFrame:
     """``Monitor.run`` through the compiled loop (the monitor is reset): ``log`` plus
     the same output columns as the pure-Python stages (``attrs`` left to the caller)."""
@@ -628,6 +628,8 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     n = len(log)
     cols = list(k.in_cols)
     src = [(_column(log, c) if c in log.columns else None) for c in cols]
+    # chunks of 4096 rows: the row-major chunk buffers stay in the cache while they are
+    # transposed into the column-major output (32768 rows: about 0.4 us/sample more)
     Y = np.empty((n, len(k.out_cols)), order="F")  # columns contiguous: no copy each
     EX = np.empty((n, N_EX))
     m = min(chunk, n)
