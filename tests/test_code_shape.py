@@ -89,3 +89,40 @@ def test_the_import_parser_sees_relative_and_lazy_imports() -> None:
     src = "from ..sim import simulate\n\ndef f():\n    import grfguard.report.html\n"
     mods = _imports_of(src, ("grfguard", "estimate"))
     assert {"grfguard.sim", "grfguard.sim.simulate", "grfguard.report.html"} <= mods
+
+
+def _top_level_imports(source: str, name: str, is_pkg: bool) -> set[str]:
+    """Modules imported by the top-level statements of module ``name`` (imports inside
+    functions and ``if`` blocks, e.g. ``TYPE_CHECKING``, run later or never)."""
+    pkg = tuple(name.split(".")) if is_pkg else tuple(name.split(".")[:-1])
+    body = ast.parse(source).body
+    return set().union(*(_imports_of(ast.unparse(n), pkg) for n in body
+                         if isinstance(n, (ast.Import, ast.ImportFrom))))
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """grfguard module -> the grfguard modules its top-level imports load."""
+    mods: dict[str, Path] = {}
+    for path in SRC.rglob("*.py"):
+        parts = path.relative_to(SRC.parent).with_suffix("").parts
+        mods[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return {m: {d for d in _top_level_imports(p.read_text(), m, p.name == "__init__.py")
+                if d in mods and d != m} for m, p in mods.items()}
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle of ``graph`` (empty when there is none)."""
+    import graphlib
+
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as exc:
+        return list(exc.args[1])
+    return []
+
+
+def test_no_import_cycles() -> None:
+    graph = _module_graph()
+    assert len(graph) > 50 and graph["grfguard.pipeline"]  # the parser sees the package
+    assert not _cycle(graph), f"import cycle (top-level imports): {_cycle(graph)}"
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}})  # the checker finds one

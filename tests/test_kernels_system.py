@@ -110,3 +110,47 @@ def test_streaming_equals_batch_and_pickle_continues() -> None:
             a, b = o[f"recovered_{s}"], batch[f"recovered_{s}"].iloc[k]
             assert a == b or (math.isnan(a) and math.isnan(b))
     assert out["model_mismatch"].iloc[n - 1]
+
+
+def test_vibration_latching_while_the_estimator_inputs_are_missing() -> None:
+    """The twin sensor takes the main sensor's kinematics and rates and computes its
+    outputs only once the vibration switch is on (``kernels/vfs.py``
+    ``vfs_step_shared``). When the switch latches while the joint angles are missing, the
+    twin repeats its last output, computed then: every output is the same bits as with the
+    twin computing everything itself on every sample (``Y_SHARE`` off), on this walk and
+    on the walk with a time gap and missing accelerometer samples as well."""
+    from grfguard.kernels.system import Y_SHARE
+
+    log = inject_faults(_walk("vibration"), PAPER, seed=0)
+    mon = Monitor.for_log(log)
+    first = mon.run(log)
+    on = first["model_mismatch_reason"].astype(str).str.contains("vibration").to_numpy()
+    assert on.any()
+    i = int(np.flatnonzero(on)[0])
+    gap = log.copy()
+    joints = [c for c in log.columns if c.startswith("q_")]
+    gap.loc[gap.index[i - 30:i + 30], joints] = np.nan
+    brk = log.copy()
+    brk.loc[brk.index[i - 500:i - 400], [c for c in log.columns if c.startswith("imu_acc")]] = (
+        np.nan)
+    t = brk["time"].to_numpy().copy()
+    t[i + 1000:] += 0.05
+    brk["time"] = t
+    for lg in (gap, brk):
+        mon = Monitor.for_log(lg)
+        k = mon._kernel(True, True)
+        assert k.sysp[Y_SHARE] == 1.0
+        out = mon.run(lg)
+        if lg is gap:  # latched inside the gap: the switch does not read the joints
+            on2 = out["model_mismatch_reason"].astype(str).str.contains("vibration")
+            assert int(np.flatnonzero(on2.to_numpy())[0]) == i
+            assert out["vfs_valid"].iloc[i] == 0.0
+        k.sysp[Y_SHARE] = 0.0
+        ref = mon.run(lg)
+        assert list(out.columns) == list(ref.columns)
+        for c in out.columns:
+            a, b = out[c].to_numpy(), ref[c].to_numpy()
+            if a.dtype.kind == "f":
+                np.testing.assert_array_equal(a.view(np.int64), b.view(np.int64), err_msg=c)
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=c)

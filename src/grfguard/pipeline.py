@@ -129,13 +129,6 @@ def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
     return pd.concat([keep, add], axis=1)[order]
 
 
-def _kernel_supports(cfg: Any) -> bool:
-    """The compiled virtual sensor covers ``cfg``."""
-    from grfguard.kernels.vfs import VFSKernel
-
-    return VFSKernel.supports(cfg)
-
-
 def _has_gyro_ref(log: pd.DataFrame) -> tuple[bool, bool]:
     """Whether the log carries the gyro and the planned contact (the compiled virtual
     sensor's switches)."""
@@ -314,16 +307,6 @@ class Monitor:
         return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
                    standing=standing, compiled=compiled)
 
-    @property
-    def sensors(self) -> list[Any]:
-        """Per-sensor state of the default detector."""
-        k = self._kernel()
-        if k is not None:
-            from grfguard.kernels.detect import sensor_states
-
-            return sensor_states(k.ss)
-        return self.detector.sensors
-
     def compiled_reason(self) -> str:
         """Empty when the whole monitor runs compiled (:mod:`grfguard.kernels.monitor`:
         guards, virtual sensor, default detector and recovery in one compiled step);
@@ -332,16 +315,12 @@ class Monitor:
             return "compiled=False"
         if self.config.method != "default":
             return f"method {self.config.method!r}"
-        if self.vfs_quiet is not None and not (
-                getattr(self.vfs, "compiled", False) and hasattr(self.vfs_quiet, "kernel")
-                and _kernel_supports(self.vfs_quiet.config)):
-            return "the vibration twin's virtual force sensor settings"
         if self.config.diagnostics:
             return "diagnostics"
         if self.vfs is None:
             return ""
         if not (getattr(self.vfs, "compiled", False) and hasattr(self.vfs, "kernel")):
-            return "a pure-Python virtual force sensor"
+            return "a pure-Python virtual force sensor"  # (its vibration twin is the same type)
         if getattr(getattr(self.vfs, "config", None), "com_method", "") == "paper":
             return "the paper's CoM filter (its sensor reads the force sensors)"
         return ""

@@ -76,6 +76,7 @@ from grfguard.kernels.system import (
     sys_pre_detect,
     sys_pre_vfs,
     sys_twin,
+    sys_twin_prepare,
     system_reset,
 )
 from grfguard.kernels.system import OUT_COLUMNS as SYS_COLUMNS
@@ -86,6 +87,7 @@ from grfguard.kernels.vfs import (
     IN_COLUMNS,
     OUT_COLUMNS,
     VFSKernel,
+    twin_shareable,
     vfs_step,
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES
@@ -156,14 +158,11 @@ def _input_guard(xin, xc, mp, lims):
 
 
 @njit_nort
-def _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
-    """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break,
-    or the row's precomputed columns); returns ``valid`` (``Monitor._valid``)."""
+def _estimate(xin, xc, mode, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
+    """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break
+    by the caller, or the row's precomputed columns); returns ``valid``
+    (``Monitor._valid``)."""
     if mode == 1.0:
-        if reset:  # Monitor._vfs_resync
-            vstate[_S_HN] = 0.0
-            vstate[_S_PREVF] = 0.0
-            vstate[_S_PREVL_OK] = 0.0
         vfs_step(xc[9:9 + 24], vy, vstate, cf, ci, vws, viws)
         for i in range(8):
             v[i] = vy[i]
@@ -276,10 +275,15 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
     tot = ws[_W_TOT:_W_TOT + 2]
     cest = ws[_W_CEST:_W_CEST + 2]
     cref = ws[_W_CREF:_W_CREF + 2]
-    valid = _estimate(xin, xc, mode, reset, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy)
+    if mode == 1.0 and reset:  # Monitor._vfs_resync
+        vstate[_S_HN] = 0.0
+        vstate[_S_PREVF] = 0.0
+        vstate[_S_PREVL_OK] = 0.0
+    share = son and mode == 1.0 and sys_twin_prepare(sysp, reset, vstate, qstate, ci)
+    valid = _estimate(xin, xc, mode, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy)
     if son:
-        valid = sys_twin(sysp, syss, prm, xc, reset, valid, vy, qy, qstate, qcf, qci, qws,
-                         qiws, v, tot, cest, _O_TOT, _O_CEST, _O_VALID)
+        valid = sys_twin(sysp, syss, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws,
+                         qiws, vstate, vws, v, tot, cest, _O_TOT, _O_CEST, _O_VALID)
     bounded, state = _prepare(gs, prm, clock, st, reset, valid, v, tot, cest)
     if son:
         sys_pre_detect(sysp, syss, ss, gs, xc[1:9], v, tot, cref, cest, sd)
@@ -336,7 +340,7 @@ class MonitorKernel:
         self.with_system = system is not None
         self.in_cols = input_columns(self.with_vfs, self.with_system)
         self.out_cols = output_columns(self.with_vfs, self.with_system)
-        self._system_arrays(system)
+        self._system_arrays(system, vfs_kernel)
         self.prm = np.ascontiguousarray(prm, dtype=float)
         self.ss, self.gs = new_state()
         n_in = len(self.in_cols)
@@ -372,10 +376,11 @@ class MonitorKernel:
         self._pack()
         system_reset(self.sysp, self.syss, self.prm, self.qstate)
 
-    def _system_arrays(self, system: Any) -> None:
+    def _system_arrays(self, system: Any, vfs_kernel: VFSKernel | None) -> None:
         """The system layer's parameters, state and twin virtual sensor (placeholders when
-        the layer is off)."""
-        from grfguard.kernels.system import system_params
+        the layer is off); the twin takes the main sensor's front of the step when
+        :func:`~grfguard.kernels.vfs.twin_shareable`."""
+        from grfguard.kernels.system import Y_SHARE, system_params
 
         self.quiet_kernel = None
         self.vib_config = None
@@ -392,6 +397,8 @@ class MonitorKernel:
         else:
             self.qstate, self.qcf, self.qws, self.qci, self.qiws = (
                 qk.state, qk.cf, qk.ws, qk.ci, qk.iws)
+            if vfs_kernel is not None and self.sysp.size > Y_SHARE:
+                self.sysp[Y_SHARE] = 1.0 if twin_shareable(vfs_kernel, qk) else 0.0
         self.qy = np.zeros(_NV)
 
     # Every array of the step lives in two buffers (floats F, ints I) so that a call from

@@ -34,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from grfguard.kernels._jit import njit, view1d
+from grfguard.kernels._jit import njit_nort as njit
+from grfguard.kernels._jit import view1d
 from grfguard.kernels.detect import CN, CP, FLAG, G_GNEG, G_GPOS, P_CORSIG, SWN, SWP, _fsum
 from grfguard.kernels.fk import fk_sites
 from grfguard.kernels.standing import _STAGE as SD_STAGE
@@ -45,12 +46,16 @@ from grfguard.kernels.vfs import (
     _kinematics,
     _scratch_views,
     _unpack,
+    resolve_pending,
+    same_front_state,
     vfs_step,
+    vfs_step_shared,
 )
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = ["N_SYSP", "N_SYSS", "OUT_COLUMNS", "system_params", "system_reset",
-           "sys_pre_vfs", "sys_twin", "sys_pre_detect", "sys_output", "reason_text"]
+           "sys_pre_vfs", "sys_twin_prepare", "sys_twin", "sys_pre_detect", "sys_output",
+           "reason_text"]
 
 # ------------------------------------------------------------------ parameters (sysp)
 (Y_ON, Y_DT, Y_W) = range(3)
@@ -63,7 +68,8 @@ Y_T_ON, Y_T_LEARN, Y_T_APPLY, Y_T_DEAD, Y_T_EVERY = range(40, 45)
 Y_V_ON, Y_V_B0, Y_V_B1, Y_V_B2, Y_V_A1, Y_V_A2, Y_V_LAM, Y_V_LIMIT, Y_V_START = range(45, 54)
 Y_CORSIG, Y_CORSIG_Q = 54, 55
 Y_I_GYRO, Y_I_CREF, Y_I_ZMP, Y_I_Q, Y_I_QUAT, Y_I_ACC = range(56, 62)
-N_SYSP = 62
+Y_SHARE = 62  # 1: the twin may take the main sensor's front of the step (twin_shareable)
+N_SYSP = 63
 # ------------------------------------------------------------------ state (syss)
 S_M11, S_M12, S_M22, S_B1, S_B2 = range(5)
 S_TH, S_SUMR, S_SUMV, S_SRF, S_SVF, S_MVF, S_AF, S_LOADED, S_ARMED = 5, 8, 9, 10, 12, 14, 18, 20, 21
@@ -387,18 +393,36 @@ def _vibration(yp, ys, ax, ay):
 
 
 @njit
-def sys_twin(yp, ys, prm, xc, reset, valid, vy, qy, qstate, qcf, qci, qws, qiws, v, tot,
-             cest, o_tot, o_cest, o_valid):
-    """The twin virtual sensor without the accelerometer (fully reset at a break), the
-    vibration switch; once on, the twin's outputs replace ``vy``, ``v``, ``tot``, ``cest``
-    and the corner threshold is widened. Returns the sample's ``valid``."""
+def sys_twin_prepare(yp, reset, vstate, qstate, ci):
+    """Before the main sensor's step (after its resync): the twin fully reset at a break;
+    True when the twin may take the main's front of the step this sample (layer on,
+    ``Y_SHARE``, and the twin's front state equal to the main's)."""
     if yp[Y_V_ON] == 0.0:
-        return valid
+        return False
     if reset:
         _vfs_reset(qstate)
-    vfs_step(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws)
+    return yp[Y_SHARE] != 0.0 and same_front_state(vstate, qstate, ci)
+
+
+@njit
+def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws, vstate, vws,
+             v, tot, cest, o_tot, o_cest, o_valid):
+    """The twin virtual sensor without the accelerometer (reset at a break by
+    :func:`sys_twin_prepare`; with ``share`` and a valid main sample it takes the main's
+    front of the step, state ``vstate`` / scratch ``vws``), the vibration switch; once on,
+    the twin's outputs replace ``vy``, ``v``, ``tot``, ``cest`` and the corner threshold is
+    widened (before that the twin's outputs are not computed, only its filters run).
+    Returns the sample's ``valid``."""
+    if yp[Y_V_ON] == 0.0:
+        return valid
     ia = int(yp[Y_I_ACC])
-    if not _vibration(yp, ys, xc[ia], xc[ia + 1]):
+    on = _vibration(yp, ys, xc[ia], xc[ia + 1])  # (reads neither sensor)
+    if share and valid:  # the twin's outputs computed only when used
+        vfs_step_shared(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws, vstate, vws, on)
+    else:
+        resolve_pending(qy, qstate, qcf, qci, qws, qiws)
+        vfs_step(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws)
+    if not on:
         return valid
     for j in range(qy.shape[0]):
         vy[j] = qy[j]

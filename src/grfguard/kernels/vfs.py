@@ -35,7 +35,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from grfguard.errors import ConfigError, LogFormatError
+from grfguard.errors import LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.io.schema import (
     CONTACT_REF,
@@ -64,7 +64,9 @@ from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     zmp_kalman,
 )
 
-__all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch"]
+__all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch",
+           "vfs_step_shared", "resolve_pending", "same_front_state",
+           "twin_shareable"]
 
 #: Input row layout of :func:`vfs_step`.
 IN_COLUMNS: tuple[str, ...] = (*JOINT_COLUMNS, *IMU_QUAT, *IMU_GYRO, *IMU_ACC, *CONTACT_REF)
@@ -228,15 +230,37 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
         _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt)
         _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
                        order, dt)
-        F0, F1, F2, ld0, ld1 = _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main,
-                                        v3a, v3b, v3c, v3d, aw, ax, ay, az, order, g)
-        # -------------------------------------------------------- ZMP (Newton-Euler)
-        h = com2 - ground
-        fz = max(F2, 1.0)
-        zmp0 = com0 - (h * F0 + ld1) / fz
-        zmp1 = com1 - (h * F1 - ld0) / fz
-        if prm[P_ZMP_KF] != 0.0:  # vfs_paper: pendulum Kalman filter ZMP
-            zmp0, zmp1 = zmp_kalman(state, xo, prm, com0, com1, com2, ground, F2, ld0, ld1)
+        _keep_shared(ws, pwt0, pwt1, pwt2, ground, com0, com1, com2, st0, st1, aw, ax, ay, az)
+        F0, F1, F2, zmp0, zmp1 = _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw,
+                                               main, v3a, v3b, v3c, v3d, aw, ax, ay, az,
+                                               order, g, xo, com0, com1, com2, ground)
+    _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M,
+                   qp_rhs, qp_dots, iws, tail, pwt0, pwt1, pwt2, ground, com0, com1, com2, F0,
+                   F1, F2, zmp0, zmp1, st0, st1)
+    return True
+
+
+@njit_nort(inline="always")
+def _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v3c, v3d, aw,
+                  ax, ay, az, order, g, xo, com0, com1, com2, ground):
+    """Low-passed raw rates (accelerometer fused) to the total force ``F0, F1, F2`` [N] and
+    the Newton-Euler ZMP ``zmp0, zmp1`` [m] (or the pendulum Kalman filter's)."""
+    F0, F1, F2, ld0, ld1 = _filters(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a,
+                                    v3b, v3c, v3d, aw, ax, ay, az, order, g)
+    h = com2 - ground
+    fz = max(F2, 1.0)
+    zmp0 = com0 - (h * F0 + ld1) / fz
+    zmp1 = com1 - (h * F1 - ld0) / fz
+    if prm[P_ZMP_KF] != 0.0:  # vfs_paper: pendulum Kalman filter ZMP
+        zmp0, zmp1 = zmp_kalman(state, xo, prm, com0, com1, com2, ground, F2, ld0, ld1)
+    return F0, F1, F2, zmp0, zmp1
+
+
+@njit_nort
+def _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M,
+                   qp_rhs, qp_dots, iws, tail, pwt0, pwt1, pwt2, ground, com0, com1, com2, F0,
+                   F1, F2, zmp0, zmp1, st0, st1):
+    """Corner contact, force split (compliance QP or the paper's) and the output row."""
     ctc = view1d(iws, 0, 8)
     if prm[P_SPLIT_PAPER] != 0.0:  # vfs_paper: the paper's split
         paper_split(prm, pk, sxp, sxm, pwt0, pwt1, pwt2, com0, com1, com2, F0, F1, F2, st0,
@@ -248,7 +272,27 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
                      qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8),
                      tail, F2, zmp0, zmp1)
     _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
-    return True
+
+
+#: Floats at the end of the scratch ``ws`` where a step keeps what a twin sensor of the
+#: same robot and attitude reuses (:func:`vfs_step_shared`): trunk position, ground,
+#: CoM, stance, attitude.
+N_SHARED = 16
+
+
+@njit_nort(inline="always")
+def _shared_slots(ws):
+    return view1d(ws, ws.shape[0] - N_SHARED, N_SHARED)
+
+
+@njit_nort(inline="always")
+def _keep_shared(ws, pwt0, pwt1, pwt2, ground, com0, com1, com2, st0, st1, aw, ax, ay, az):
+    sh = _shared_slots(ws)
+    sh[0], sh[1], sh[2], sh[3] = pwt0, pwt1, pwt2, ground
+    sh[4], sh[5], sh[6] = com0, com1, com2
+    sh[7] = 1.0 if st0 else 0.0
+    sh[8] = 1.0 if st1 else 0.0
+    sh[9], sh[10], sh[11], sh[12] = aw, ax, ay, az
 
 
 @njit_nort(inline="always")
@@ -354,7 +398,7 @@ def _scratch_views(ws, nq, nb):
     o += 8
     return (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a,
             v3b, v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs,
-            qp_dots, view1d(ws, o, ws.shape[0] - o))
+            qp_dots, view1d(ws, o, ws.shape[0] - N_SHARED - o))
 
 
 @njit_nort(inline="always")
@@ -908,6 +952,148 @@ def vfs_run(X, Y, state, cf, ci, ws, iws):
     return n
 
 
+
+# ------------------------------------------------------------------ twin sensor
+# A twin sensor (the system layer's: same robot, joints and attitude; other filters, no
+# accelerometer) shares the front of the step with the main one: attitude, kinematics,
+# stance, odometry, raw rates and angular momentum depend only on the row and on this
+# part of the state. While the twin's part equals the main's bit for bit
+# (:func:`same_front_state`), the twin takes the main's results (:func:`vfs_step_shared`)
+# instead of computing them again; the outputs are the same bits by construction.
+_S_FRONT_END = _S_PREVL + 3  # state 1 .. _S_FRONT_END: attitude, anchor, histories, L
+
+
+@njit_nort(inline="always")
+def _pose_range(state, nb, order):
+    """Start and end of the previous body poses (momentum finite differences) in
+    ``state``."""
+    a = _S_FIXED + 15 * order
+    return a, a + 12 * (nb - 1)
+
+
+@njit_nort
+def same_front_state(mstate, qstate, ci):
+    """Whether the twin's state ``qstate`` equals the main's ``mstate`` in every value the
+    front of the step reads (NaN counts as different: then no sharing)."""
+    for k in range(1, _S_FRONT_END):
+        if mstate[k] != qstate[k]:
+            return False
+    if mstate[_S_PREVF] == 0.0:  # no previous poses are read
+        return True
+    a, b = _pose_range(mstate, ci[0], ci[4])
+    for k in range(a, b):
+        if mstate[k] != qstate[k]:
+            return False
+    return True
+
+
+#: Floats at the end of a sensor's state: a twin's split inputs kept while its outputs are
+#: not needed (:func:`vfs_step_shared` with ``need`` False), flag first.
+N_PEND = 40
+
+
+@njit_nort
+def vfs_step_shared(x, y, state, cf, ci, ws, iws, mstate, mws, need):
+    """:func:`vfs_step` of a twin sensor on the row the main sensor (state ``mstate``,
+    scratch ``mws``) has just processed as a valid sample, taking the main's front of the
+    step. Preconditions (the caller's): :func:`twin_shareable` of the two kernels, and
+    :func:`same_front_state` held before the main's step. Without ``need`` the stateless
+    end of the step (contact, QP, outputs) is deferred: ``y`` is not written and the
+    split's inputs are kept until :func:`resolve_pending` (the next output or an invalid
+    sample that repeats it). Returns True."""
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
+    nb = ci[0]
+    nq = ci[2]
+    order = filt_b.shape[1] - 1
+    (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
+     v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+     tail) = _scratch_views(ws, nq, nb)
+    m = _scratch_views(mws, nq, nb)
+    msxp, mraw = m[8], m[11]
+    for k in range(1, _S_FRONT_END):
+        state[k] = mstate[k]
+    a, b = _pose_range(mstate, nb, order)
+    for k in range(a, b):
+        state[k] = mstate[k]
+    for k in range(9):
+        raw[k] = mraw[k]
+    sh = _shared_slots(mws)
+    com0, com1, com2, ground = sh[4], sh[5], sh[6], sh[3]
+    xo = _S_FIXED + 15 * order + 12 * (nb - 1)
+    F0, F1, F2, zmp0, zmp1 = _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw, main,
+                                           v3a, v3b, v3c, v3d, sh[9], sh[10], sh[11], sh[12],
+                                           order, prm[_P_G], xo, com0, com1, com2, ground)
+    pend = view1d(state, state.shape[0] - N_PEND, N_PEND)
+    for k in range(8):
+        pend[1 + 3 * k] = msxp[1 + k, 0]
+        pend[2 + 3 * k] = msxp[1 + k, 1]
+        pend[3 + 3 * k] = msxp[1 + k, 2] - corner_radius[k]
+    for k in range(9):
+        pend[25 + k] = sh[k]  # pwt, ground, com, stance
+    pend[34], pend[35], pend[36], pend[37], pend[38] = F0, F1, F2, zmp0, zmp1
+    pend[0] = 1.0
+    if need:
+        resolve_pending(y, state, cf, ci, ws, iws)
+    return True
+
+
+@njit_nort
+def resolve_pending(y, state, cf, ci, ws, iws):
+    """The deferred end of a twin's step (:func:`vfs_step_shared`), if any, into ``y``
+    and the state's last output."""
+    pend = view1d(state, state.shape[0] - N_PEND, N_PEND)
+    if pend[0] == 0.0:
+        return
+    pend[0] = 0.0
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
+    (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
+     v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+     tail) = _scratch_views(ws, ci[2], ci[0])
+    for k in range(8):
+        pk[k, 0] = pend[1 + 3 * k]
+        pk[k, 1] = pend[2 + 3 * k]
+        pk[k, 2] = pend[3 + 3 * k]
+    _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z,
+                   qp_M, qp_rhs, qp_dots, iws, tail, pend[25], pend[26], pend[27], pend[28],
+                   pend[29], pend[30], pend[31], pend[34], pend[35], pend[36], pend[37],
+                   pend[38], pend[32] != 0.0, pend[33] != 0.0)
+
+
+#: The settings a twin may change without changing the front of the step.
+_TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT)
+
+
+def twin_shareable(main: VFSKernel, twin: VFSKernel) -> bool:
+    """Whether ``twin`` can take ``main``'s front of the step (:func:`vfs_step_shared`):
+    the same model, sites, attitude filter and inputs, the default (non-paper) odometry,
+    CoM and split, filters of the same order, and a twin valid whenever the main is (it
+    does not read the accelerometer unless the main does)."""
+    pm, pt = main.prm, twin.prm
+    if (pm[P_KANC] > 0.0 or pm[P_COM_PAPER] != 0.0 or pm[P_SPLIT_PAPER] != 0.0
+            or main.order != twin.order or pt[_P_USE_ACC] > pm[_P_USE_ACC]):
+        return False
+    free = np.zeros(N_PRM, bool)
+    free[list(_TWIN_FREE_PRM)] = True
+    free[18:] = True  # the non-default stages (their flags are checked above / own state)
+    if not np.array_equal(pm[~free], pt[~free]) or not np.array_equal(main.ci, twin.ci):
+        return False
+    if pm[P_KANC] != pt[P_KANC] or pm[P_COM_PAPER] != pt[P_COM_PAPER] or (
+            pm[P_SPLIT_PAPER] != pt[P_SPLIT_PAPER]):
+        return False
+    # the constants after the filters (tree, sites) and before them (inertia, radii)
+    o = N_PRM + main.body_inertia.size + main.corner_radius.size
+    f = 3 * (main.order + 1) * 2 + 3 * main.order
+    return (np.array_equal(main.cf[N_PRM:o], twin.cf[N_PRM:o])
+            and np.array_equal(main.cf[o + f:], twin.cf[o + f:])
+            and main.ws.size == twin.ws.size)
+
+#: Former names of :func:`vfs_step` / :func:`vfs_run`.
+vfs_step_packed = vfs_step
+vfs_run_packed = vfs_run
+
+
 _ND = np.ndarray
 _F8 = np.dtype(np.float64)
 _XST = (8,)
@@ -923,17 +1109,10 @@ class VFSKernel:
             MuJoCo model are taken from it).
         has_gyro: The input carries the gyro (else the logged attitude is used as is).
         has_ref: The input carries the planned contact (else the lowest-foot fallback).
-
-    Raises:
-        ConfigError: The settings are not covered (see :meth:`supports`).
     """
 
     def __init__(self, vfs, has_gyro: bool = True, has_ref: bool = True) -> None:
         cfg: VFSConfig = vfs.config
-        why = self.unsupported(cfg)
-        if why:
-            raise ConfigError(f"the compiled virtual force sensor does not support {why}; "
-                              "use grfguard.estimate.vfs.VirtualForceSensor")
         kin = vfs.kin
         self.config = cfg
         self.tree = TreeModel.from_mujoco(kin.model)
@@ -987,7 +1166,7 @@ class VFSKernel:
         self.filt_zi = np.ascontiguousarray(np.stack(zs))
         self.order = cfg.filter_order
         nb = tm.nbody
-        self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE)
+        self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE + N_PEND)
         header = np.array([nb, tm.jnt_type.shape[0], tm.nq,
                            tm.site_body.shape[0], self.order], np.int64)
         self.cf = np.ascontiguousarray(np.concatenate([
@@ -1005,17 +1184,6 @@ class VFSKernel:
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
         self.iws = np.zeros(64, np.int64)
         self.reset()
-
-    @staticmethod
-    def unsupported(cfg: VFSConfig) -> str:
-        """Empty when ``cfg`` is covered, else which setting is not (every
-        :class:`VFSConfig` is)."""
-        return ""
-
-    @classmethod
-    def supports(cls, cfg: VFSConfig) -> bool:
-        """Whether :class:`VFSKernel` covers these settings."""
-        return not cls.unsupported(cfg)
 
     def reset(self) -> None:
         """Forget all state (as ``VirtualForceSensor.reset``)."""
