@@ -84,3 +84,17 @@ def test_single_sensor_offset_is_not_blamed_on_the_model(exact):
     df, v = exact
     share, last = _status(df, v, {"r2": 100.0})
     assert share < 0.05, last.reason
+
+
+def test_system_limits_are_fractions_of_the_weight() -> None:
+    """The swing-zero limit and deadband and the common-mode outlier bound are fractions
+    of the robot's weight: 20 N, 3 N and 20 N on SURALP (as tuned), scaled on others."""
+    from grfguard.detect.system import SwingZeroLearner
+    from grfguard.model.robot import RobotConfig
+
+    z, cm = SwingZeroLearner(SURALP, 0.001), CommonModeMonitor(SURALP, 0.001)
+    assert z.limit_n == 20.0 and cm.outlier_n == 20.0
+    assert z.deadband_n == pytest.approx(3.0, abs=1e-12)
+    light = RobotConfig(mass=SURALP.mass / 4)
+    assert SwingZeroLearner(light, 0.001).limit_n == pytest.approx(5.0)
+    assert CommonModeMonitor(light, 0.001).outlier_n == pytest.approx(5.0)

@@ -57,9 +57,10 @@ class CommonModeConfig:
         max_cop_shift_m: Bound of the CoP shift used in the correction [m].
         min_load_fraction: A foot enters the fit when its virtual load exceeds this
             fraction of the weight.
-        outlier_n: A sensor whose residual misses the common pattern by more than this
-            [N] and by ``outlier_ratio`` times the median miss is left out of the sample.
-        outlier_ratio: See ``outlier_n``.
+        outlier_fraction: A sensor whose residual misses the common pattern by more than
+            this fraction of the weight and by ``outlier_ratio`` times the median miss is
+            left out of the sample (0.0179: 20 N on a 114 kg robot).
+        outlier_ratio: See ``outlier_fraction``.
         single_support_only: Learn only from single-support samples (one foot loaded),
             where the per-sensor stance tests run: in double support a CoM error moves
             load between the feet, a pattern the common CoP shift does not describe.
@@ -72,7 +73,7 @@ class CommonModeConfig:
     max_ratio: float = 0.15
     max_cop_shift_m: float = 0.05
     min_load_fraction: float = 0.2
-    outlier_n: float = 20.0
+    outlier_fraction: float = 0.01789094396198532
     outlier_ratio: float = 4.0
     single_support_only: bool = True
 
@@ -85,7 +86,7 @@ class CommonModeConfig:
         check_number(o, "max_ratio", self.max_ratio, 0.0, 1.0, "")
         check_number(o, "max_cop_shift_m", self.max_cop_shift_m, 0.0, 0.5, "m")
         check_number(o, "min_load_fraction", self.min_load_fraction, 0.0, 1.0, "")
-        check_number(o, "outlier_n", self.outlier_n, 0.0, 1e5, "N")
+        check_number(o, "outlier_fraction", self.outlier_fraction, 0.0, 10.0, "")
         check_number(o, "outlier_ratio", self.outlier_ratio, 1.0, 100.0, "")
 
 
@@ -125,6 +126,8 @@ class CommonModeMonitor:
         self.robot = robot
         self.dt_s = check_period("CommonModeMonitor", dt_s)
         self.config = config if config is not None else CommonModeConfig()
+        #: ``outlier_fraction`` of this robot's weight [N]
+        self.outlier_n = self.config.outlier_fraction * robot.weight
         p = robot.sensor_positions_in_foot()
         self._x = np.concatenate([p[:, 0], p[:, 0]])
         self._y = np.concatenate([p[:, 1], p[:, 1]])
@@ -224,7 +227,7 @@ class CommonModeMonitor:
         e = {i: abs(res[i] - (af[i // 4] * phi[i][0] + b0 * phi[i][1] + c0 * phi[i][2]))
              for i in range(8) if use[i]}
         worst = max(e, key=e.__getitem__)
-        if e[worst] > max(c.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
+        if e[worst] > max(self.outlier_n, c.outlier_ratio * float(np.median(list(e.values())))):
             use[worst] = False
 
     def _learn(self, res: list[float], phi: list, use: list[bool]) -> None:
@@ -325,10 +328,12 @@ class SwingZeroConfig:
         learn_s: Swing time (after ``settle_s``) per foot over which the zeros are
             averaged; afterwards they are frozen (a later drift is not absorbed) [s].
         apply_after_s: Learned swing time before a zero is subtracted [s].
-        limit_n: A swing reading whose running mean is beyond this [N] is a fault (left
-            to the swing test), not a zero: it is not learned.
-        deadband_n: A learned zero smaller than this [N] is not applied (on a sensor
-            without zero error the monitor sees the plain readings).
+        limit_fraction: A swing reading whose running mean is beyond this fraction of the
+            weight is a fault (left to the swing test), not a zero: it is not learned
+            (0.0179: 20 N on a 114 kg robot).
+        deadband_fraction: A learned zero smaller than this fraction of the weight is not
+            applied (on a sensor without zero error the monitor sees the plain readings;
+            0.00268: 3 N on a 114 kg robot).
         swing_load_fraction: The foot is in swing when its virtual load is below this
             fraction of the weight (and contact is neither planned nor estimated).
     """
@@ -336,8 +341,8 @@ class SwingZeroConfig:
     settle_s: float = 0.1
     learn_s: float = 1.0
     apply_after_s: float = 0.3
-    limit_n: float = 20.0
-    deadband_n: float = 3.0
+    limit_fraction: float = 0.01789094396198532
+    deadband_fraction: float = 0.002683641594297798
     swing_load_fraction: float = 0.02
 
     def __post_init__(self) -> None:
@@ -345,8 +350,8 @@ class SwingZeroConfig:
         check_number(o, "settle_s", self.settle_s, 0.0, 10.0, "s")
         check_number(o, "learn_s", self.learn_s, 0.0, 600.0, "s")
         check_number(o, "apply_after_s", self.apply_after_s, 0.0, 600.0, "s")
-        check_number(o, "limit_n", self.limit_n, 0.0, 1e4, "N")
-        check_number(o, "deadband_n", self.deadband_n, 0.0, 1e4, "N")
+        check_number(o, "limit_fraction", self.limit_fraction, 0.0, 10.0, "")
+        check_number(o, "deadband_fraction", self.deadband_fraction, 0.0, 10.0, "")
         check_number(o, "swing_load_fraction", self.swing_load_fraction, 0.0, 1.0, "")
 
 
@@ -356,8 +361,9 @@ class SwingZeroLearner:
 
     Per foot, samples count once the foot has been in swing for ``settle_s``; the zero of
     a sensor is the mean of its first ``learn_s`` of such samples (the sensor not flagged
-    and the running mean within ``limit_n``), then frozen. A zero is returned once
-    ``apply_after_s`` of swing has been averaged and when it exceeds ``deadband_n``.
+    and the running mean within ``limit_fraction`` of the weight), then frozen. A zero is
+    returned once ``apply_after_s`` of swing has been averaged and when it exceeds
+    ``deadband_fraction`` of the weight.
 
     Args:
         robot: Robot description (weight).
@@ -373,6 +379,9 @@ class SwingZeroLearner:
         self.robot = robot
         self.dt_s = check_period("SwingZeroLearner", dt_s)
         self.config = config if config is not None else SwingZeroConfig()
+        #: ``limit_fraction`` and ``deadband_fraction`` of this robot's weight [N]
+        self.limit_n = self.config.limit_fraction * robot.weight
+        self.deadband_n = self.config.deadband_fraction * robot.weight
         self.reset()
 
     def reset(self) -> None:
@@ -386,7 +395,7 @@ class SwingZeroLearner:
     def armed(self, foot: int) -> bool:
         """The foot has swung long enough for its zeros to be known (``apply_after_s`` of
         settled swing), whether or not a zero was learned (a reading beyond
-        ``limit_n`` is a fault, left to the tests)."""
+        ``limit_fraction`` of the weight is a fault, left to the tests)."""
         return bool(self._foot_n[foot] * self.dt_s >= self.config.apply_after_s)
 
     @property
@@ -400,7 +409,8 @@ class SwingZeroLearner:
         c = self.config
         z = np.divide(self._sum, self._n, out=np.zeros(8), where=self._n > 0)
         ready = self._n * self.dt_s >= c.apply_after_s
-        return np.where(ready & (np.abs(z) > c.deadband_n) & (np.abs(z) <= c.limit_n), z, 0.0)
+        return np.where(ready & (np.abs(z) > self.deadband_n) & (np.abs(z) <= self.limit_n),
+                        z, 0.0)
 
     def update(
         self,
@@ -431,7 +441,7 @@ class SwingZeroLearner:
             for i in range(4 * f, 4 * f + 4):
                 if flagged[i] or not math.isfinite(m[i]) or self._n[i] >= max_n:
                     continue
-                if abs((self._sum[i] + m[i]) / (self._n[i] + 1)) > c.limit_n:
+                if abs((self._sum[i] + m[i]) / (self._n[i] + 1)) > self.limit_n:
                     continue
                 self._sum[i] += m[i]
                 self._n[i] += 1

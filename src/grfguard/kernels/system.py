@@ -110,12 +110,13 @@ def system_params(mon: Any, in_cols: tuple[str, ...], has_gyro: bool = True) -> 
     p[Y_CM_LAM] = math.exp(-cm.dt_s / c.time_constant_s)
     p[Y_CM_WARM], p[Y_CM_MASS], p[Y_CM_COP] = c.warmup_s, c.mass_ratio_limit, c.cop_shift_limit_m
     p[Y_CM_MAXR], p[Y_CM_MAXC] = c.max_ratio, c.max_cop_shift_m
-    p[Y_CM_MINLOAD], p[Y_CM_OUTN], p[Y_CM_OUTR] = c.min_load_fraction, c.outlier_n, c.outlier_ratio
+    p[Y_CM_MINLOAD], p[Y_CM_OUTN], p[Y_CM_OUTR] = c.min_load_fraction, cm.outlier_n, c.outlier_ratio
     p[Y_CM_SSO] = float(c.single_support_only)
     z = mon.zeros.config
     p[Y_Z_SETTLE], p[Y_Z_APPLY] = z.settle_s, z.apply_after_s
     p[Y_Z_MAXN] = z.learn_s / mon.zeros.dt_s
-    p[Y_Z_LIMIT], p[Y_Z_DEAD], p[Y_Z_SWFRAC] = z.limit_n, z.deadband_n, z.swing_load_fraction
+    p[Y_Z_LIMIT], p[Y_Z_DEAD] = mon.zeros.limit_n, mon.zeros.deadband_n
+    p[Y_Z_SWFRAC] = z.swing_load_fraction
     g = mon.gyro_bias.config
 
     def idx(col: str) -> float:
