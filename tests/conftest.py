@@ -85,3 +85,21 @@ def slow_gait_walk() -> pd.DataFrame:
 def small_robot_walk(small_robot: RobotConfig) -> pd.DataFrame:
     """30 s walk of the 60 kg ``small_robot``, default gait and noise, seed 0."""
     return simulate(small_robot, GaitConfig(duration=30.0), NoiseConfig(), seed=0)
+
+
+@pytest.fixture(scope="module")
+def talos():
+    """PAL Talos loaded from its URDF (example-robot-data), once per test module."""
+    from grfguard.model.description import load_description
+    from grfguard.model.loader import load_model
+
+    return load_model(load_description("talos"))
+
+
+@pytest.fixture(scope="module")
+def g1():
+    """Unitree G1 loaded from its URDF (example-robot-data), once per test module."""
+    from grfguard.model.description import load_description
+    from grfguard.model.loader import load_model
+
+    return load_model(load_description("g1"))

@@ -17,16 +17,9 @@ from grfguard.estimate.described import run_described, with_described_vfs  # noq
 from grfguard.evaluate.detection import evaluate_detection  # noqa: E402
 from grfguard.faults import inject_faults  # noqa: E402
 from grfguard.io.logio import read_log, write_log  # noqa: E402
-from grfguard.model.description import load_description  # noqa: E402
-from grfguard.model.loader import load_model  # noqa: E402
 from grfguard.model.robot import SENSOR_NAMES  # noqa: E402
 from grfguard.sim.config import NoiseConfig  # noqa: E402
 from grfguard.sim.wholebody import scaled_gait, simulate_robot  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def g1():
-    return load_model(load_description("g1"))
 
 
 @pytest.fixture(scope="module")

@@ -16,18 +16,13 @@ from grfguard.errors import ConfigError  # noqa: E402
 from grfguard.estimate.described import run_described, with_described_vfs  # noqa: E402
 from grfguard.faults.inject import apply_fault  # noqa: E402
 from grfguard.faults.spec import parse_fault_spec  # noqa: E402
-from grfguard.model.description import FT_AXES, load_description  # noqa: E402
-from grfguard.model.loader import load_model  # noqa: E402
+from grfguard.model.description import FT_AXES  # noqa: E402
 from grfguard.sim.config import NoiseConfig  # noqa: E402
 from grfguard.sim.wholebody import scaled_gait, simulate_robot  # noqa: E402
 
 CHANNELS = [f"ft_{s}_{a}" for s in "rl" for a in FT_AXES]
 ONSET_S = 5.0
 
-
-@pytest.fixture(scope="module")
-def talos():
-    return load_model(load_description("talos"))
 
 
 @pytest.fixture(scope="module")

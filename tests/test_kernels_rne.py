@@ -13,8 +13,7 @@ mujoco = pytest.importorskip("mujoco")
 from grfguard.errors import ConfigError  # noqa: E402
 from grfguard.estimate.wrench import _share  # noqa: E402
 from grfguard.kernels.rne import RNEModel, new_work, rne_sample, sample_wrenches  # noqa: E402
-from grfguard.model.description import SIDES, load_description  # noqa: E402
-from grfguard.model.loader import load_model  # noqa: E402
+from grfguard.model.description import SIDES  # noqa: E402
 
 BALL_SLIDE_XML = """
 <mujoco>
@@ -43,14 +42,6 @@ BALL_SLIDE_XML = """
 """
 
 
-@pytest.fixture(scope="module")
-def talos():
-    return load_model(load_description("talos"))
-
-
-@pytest.fixture(scope="module")
-def g1():
-    return load_model(load_description("g1"))
 
 
 def _random_state(m, rng):

@@ -20,16 +20,6 @@ from grfguard.sim.wholebody import decimate, scaled_gait, simulate_robot  # noqa
 
 
 @pytest.fixture(scope="module")
-def talos():
-    return load_model(load_description("talos"))
-
-
-@pytest.fixture(scope="module")
-def g1():
-    return load_model(load_description("g1"))
-
-
-@pytest.fixture(scope="module")
 def talos_walk(talos):
     return simulate_robot(talos, scaled_gait(talos, duration=4.0), NoiseConfig.none(), seed=1)
 

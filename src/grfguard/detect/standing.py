@@ -134,7 +134,7 @@ class StandingDetector:
     """
 
     def __init__(self, dt_s: float, config: StandingConfig | None = None) -> None:
-        self.dt_s = _check_dt(dt_s)
+        self.dt_s = check_period("standing", dt_s)
         self.config = config if config is not None else StandingConfig()
         self._a = (1.0 if self.config.filter_s <= 0
                    else 1.0 - math.exp(-self.dt_s / self.config.filter_s))
@@ -322,11 +322,6 @@ class StandingDetector:
         if changed:
             self.flags = np.array(flags, dtype=bool)
             self._any = any(flags)
-
-
-def _check_dt(dt_s: float) -> float:
-    """``dt_s`` as a float [s]; ConfigError unless it is a number in (0, 1) s."""
-    return check_period("standing", dt_s)
 
 
 def _contact(cref: float, cest: float) -> bool:

@@ -165,6 +165,18 @@ def _joint_motion(i, j, t, qvel, qacc, jnt_dofadr, jnt_axis, jnt_pos, xpos, xmat
 
 
 @njit_nort(inline="always")
+def _mul_inert(I00, I11, I22, I01, I02, I12, h0, h1, h2, m, x0, x1, x2, x3, x4, x5):
+    """mju_mulInertVec: the spatial inertia (rotational ``I``, first moment ``h``, mass
+    ``m``) times the motion vector ``x`` (angular first)."""
+    return (I00 * x0 + I01 * x1 + I02 * x2 - h2 * x4 + h1 * x5,
+            I01 * x0 + I11 * x1 + I12 * x2 + h2 * x3 - h0 * x5,
+            I02 * x0 + I12 * x1 + I22 * x2 - h1 * x3 + h0 * x4,
+            h2 * x1 - h1 * x2 + m * x3,
+            h0 * x2 - h2 * x0 + m * x4,
+            h1 * x0 - h0 * x1 + m * x5)
+
+
+@njit_nort(inline="always")
 def _body_force(i, m, body_inertia, xipos, ximat, c, cvel, cacc, cfrc):
     """``cfrc[i] = I a + v x* (I v)`` (mj_rne's ``cfrc_body``; ``I`` mju_inertCom's inertia
     about the CoM ``c``)."""
@@ -187,18 +199,10 @@ def _body_force(i, m, body_inertia, xipos, ximat, c, cvel, cacc, cfrc):
     a0, a1, a2, a3, a4, a5 = cacc[i, 0], cacc[i, 1], cacc[i, 2], cacc[i, 3], cacc[i, 4], cacc[i, 5]
     v0, v1, v2, v3, v4, v5 = cvel[i, 0], cvel[i, 1], cvel[i, 2], cvel[i, 3], cvel[i, 4], cvel[i, 5]
     # mju_mulInertVec of the acceleration and of the velocity
-    f0 = I00 * a0 + I01 * a1 + I02 * a2 - h2 * a4 + h1 * a5
-    f1 = I01 * a0 + I11 * a1 + I12 * a2 + h2 * a3 - h0 * a5
-    f2 = I02 * a0 + I12 * a1 + I22 * a2 - h1 * a3 + h0 * a4
-    f3 = h2 * a1 - h1 * a2 + m * a3
-    f4 = h0 * a2 - h2 * a0 + m * a4
-    f5 = h1 * a0 - h0 * a1 + m * a5
-    g0 = I00 * v0 + I01 * v1 + I02 * v2 - h2 * v4 + h1 * v5
-    g1 = I01 * v0 + I11 * v1 + I12 * v2 + h2 * v3 - h0 * v5
-    g2 = I02 * v0 + I12 * v1 + I22 * v2 - h1 * v3 + h0 * v4
-    g3 = h2 * v1 - h1 * v2 + m * v3
-    g4 = h0 * v2 - h2 * v0 + m * v4
-    g5 = h1 * v0 - h0 * v1 + m * v5
+    f0, f1, f2, f3, f4, f5 = _mul_inert(I00, I11, I22, I01, I02, I12, h0, h1, h2, m,
+                                        a0, a1, a2, a3, a4, a5)
+    g0, g1, g2, g3, g4, g5 = _mul_inert(I00, I11, I22, I01, I02, I12, h0, h1, h2, m,
+                                        v0, v1, v2, v3, v4, v5)
     # mju_crossForce: [w x g_ang + v_lin x g_lin; w x g_lin]
     t0, t1, t2 = _cross(v0, v1, v2, g0, g1, g2)
     u0, u1, u2 = _cross(v3, v4, v5, g3, g4, g5)

@@ -952,7 +952,6 @@ def vfs_run(X, Y, state, cf, ci, ws, iws):
     return n
 
 
-
 # ------------------------------------------------------------------ twin sensor
 # A twin sensor (the system layer's: same robot, joints and attitude; other filters, no
 # accelerometer) shares the front of the step with the main one: attitude, kinematics,
@@ -1088,10 +1087,6 @@ def twin_shareable(main: VFSKernel, twin: VFSKernel) -> bool:
     return (np.array_equal(main.cf[N_PRM:o], twin.cf[N_PRM:o])
             and np.array_equal(main.cf[o + f:], twin.cf[o + f:])
             and main.ws.size == twin.ws.size)
-
-#: Former names of :func:`vfs_step` / :func:`vfs_run`.
-vfs_step_packed = vfs_step
-vfs_run_packed = vfs_run
 
 
 _ND = np.ndarray
