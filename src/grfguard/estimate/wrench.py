@@ -181,14 +181,24 @@ def _qpos_rows(robot: LoadedRobot, q: np.ndarray, quat: np.ndarray | None) -> np
     """(T, nq) configurations: base at the origin with attitude ``quat`` (identity when
     None), joints ``q``, every other coordinate at ``qpos0``."""
     m = robot.model
-    Q = np.tile(np.asarray(m.qpos0, float), (q.shape[0], 1))
+    Q = np.empty((q.shape[0], m.nq))
+    Q[:] = np.asarray(m.qpos0, float)  # broadcast: no tiled copy
     Q[:, :3] = 0.0
     if quat is None:
         Q[:, 3:7] = (1.0, 0.0, 0.0, 0.0)
     else:
         Q[:, 3:7] = quat
-    Q[:, robot.qpos_adr(robot.joint_names)] = q
+    Q[:, _index(robot.qpos_adr(robot.joint_names))] = q
     return Q
+
+
+def _index(adr) -> slice | np.ndarray:
+    """``adr`` as a slice when it is a contiguous increasing range (a plain copy instead
+    of numpy's gather/scatter), else as it is."""
+    a = np.asarray(adr, np.int64)
+    if a.size and np.array_equal(a, np.arange(a[0], a[0] + a.size)):
+        return slice(int(a[0]), int(a[0]) + a.size)
+    return a
 
 
 def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
@@ -226,6 +236,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, quat_B: np
     sites = np.array([m.site(nm).id for nm in names], np.int64)
     qvel = np.zeros((n, m.nv))
     qacc = np.zeros((n, m.nv))
+    jv = _index(jv)
     qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
     qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
     ground = np.zeros((n, 2, 6))
