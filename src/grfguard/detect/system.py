@@ -592,13 +592,13 @@ class AccVibrationDetector:
     """
 
     def __init__(self, dt_s: float, config: VibrationConfig | None = None) -> None:
-        from scipy.signal import butter
+        from grfguard._iir import butter_highpass  # scipy.signal's, without importing it
 
         self.dt_s = check_period("AccVibrationDetector", dt_s)
         self.config = config if config is not None else VibrationConfig()
         c = self.config
         wn = min(0.95, 2.0 * c.cutoff_hz * self.dt_s)
-        b, a = butter(2, wn, "highpass")
+        b, a = butter_highpass(2, wn)
         self._b = [float(q) for q in b]
         self._a = [float(q) for q in a]
         self._lam = math.exp(-self.dt_s / c.time_constant_s)
