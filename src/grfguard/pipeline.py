@@ -779,6 +779,19 @@ class Monitor:
         Raises:
             LogFormatError: If ``time`` or a ``force_<s>`` column is missing.
         """
+        k = self._batch_kernel(log)
+        if k is not None:
+            from grfguard.kernels.monitor import run_frame
+
+            out = run_frame(self, k, log)
+            out.attrs = {**log.attrs, "monitor": self.describe()}
+            return out
+        return self._run_python(log)
+
+    def _batch_kernel(self, log: pd.DataFrame) -> Any:
+        """The start of :meth:`run` (also of :func:`grfguard.io.runwriter.write_run`): the
+        columns checked, the monitor reset; the compiled kernel for ``log``, or None when
+        the monitor runs the Python stages."""
         missing = [c for c in (TIME, *(force_col(s) for s in SENSOR_NAMES)) if c not in log]
         if missing:
             raise LogFormatError(
@@ -787,14 +800,7 @@ class Monitor:
         self.reset()
         if self.vfs is not None:
             self.vfs.check_columns(log.columns)
-        k = self._kernel(*_has_gyro_ref(log))
-        if k is not None:
-            from grfguard.kernels.monitor import run_frame
-
-            out = run_frame(self, k, log)
-            out.attrs = {**log.attrs, "monitor": self.describe()}
-            return out
-        return self._run_python(log)
+        return self._kernel(*_has_gyro_ref(log))
 
     def _run_python(self, log: pd.DataFrame) -> pd.DataFrame:
         """``run`` through the Python stages (the monitor is reset)."""
