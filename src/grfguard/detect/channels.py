@@ -261,6 +261,23 @@ _MAX_EXCURSION = 200_000
 _OUT_NAMES = ("flag", "kind", "fault_est", "recovered", "onset_est")
 
 
+def _kinds(codes: np.ndarray, names: tuple[str, ...]) -> Any:
+    """The kind column of ``codes`` (indices into ``names``) in the dtype pandas gives a
+    column of those strings (its Arrow string dtype: built from the codes by Arrow, not
+    string by string from Python objects)."""
+    obj = np.array(names, dtype=object)
+    dtype = pd.Series(obj).dtype
+    if getattr(dtype, "storage", None) == "pyarrow":
+        import pyarrow as pa
+
+        arr = pa.DictionaryArray.from_arrays(pa.array(codes),
+                                             pa.array(list(names), pa.large_string()))
+        out = pd.array(arr.dictionary_decode(), dtype=dtype)
+        if out.dtype == dtype:
+            return out
+    return obj[codes]
+
+
 class ChannelMonitor:
     """Per-channel detection, kind, recovery and flag clearing (module docstring), batch
     (:meth:`run`) or one sample at a time (:meth:`update`). Both run the same compiled
@@ -354,8 +371,7 @@ class ChannelMonitor:
                      *outs)
         if n:
             self._t_prev = float(t[-1])
-        names = np.array(KIND_NAMES, dtype=object)
-        cols = {f"{name}_{c}": (names[a[j]] if name == "kind" else a[j])
+        cols = {f"{name}_{c}": (_kinds(a[j], KIND_NAMES) if name == "kind" else a[j])
                 for j, c in enumerate(chans) for name, a in zip(_OUT_NAMES, outs, strict=True)}
         if any(k in log.columns for k in cols):
             out = log.copy()

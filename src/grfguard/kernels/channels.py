@@ -31,7 +31,7 @@ import numpy as np
 from grfguard.kernels._jit import njit_nort
 
 __all__ = ["KIND_NAMES", "N_F", "N_GATE", "N_I", "N_PRM", "channels_run", "channels_sample",
-           "gate_run", "gate_step", "new_state"]
+           "gate_run", "gate_step", "new_state", "warm"]
 
 #: Output codes of ``kind`` -> names.
 KIND_NAMES = ("none", "offset", "drift", "gain", "frozen")
@@ -289,3 +289,19 @@ def channels_run(t, right, left, X, V, side, sigma, prm, fst, ist, exc, gate,
     for k in range(t.size):
         channels_sample(k, t[k], right[k], left[k], X, V, side, sigma, prm, fst, ist, exc,
                         gate, flag, kind, fault, rec, onset)
+
+
+def warm() -> None:
+    """Compile (or load) the kernels on a tiny input."""
+    fst, ist, exc, gate = new_state(1, 2)
+    t = np.array([0.0, 0.001])
+    c = np.ones(2, np.bool_)
+    X = np.ones((1, 2))
+    outs = (np.zeros((1, 2), np.bool_), np.zeros((1, 2), np.int8), np.zeros((1, 2)),
+            np.zeros((1, 2)), np.zeros((1, 2)))
+    prm = np.ones(N_PRM)
+    channels_run(t, c, c, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm, fst, ist, exc,
+                 gate, *outs)
+    channels_sample(0, 0.0, True, False, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm,
+                    fst, ist, exc, gate, *outs)
+    gate_run(gate, t, c, c, 0.1, np.zeros(2, np.bool_))
