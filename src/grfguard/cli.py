@@ -263,9 +263,9 @@ def run_log(
     """``grfguard run`` without the command line: read ``log``, run the monitor, write
     ``output``; returns the number of samples written. ``phase(name)`` (optional) is
     called at the end of each step (``read``, ``checks``, ``monitor_setup``, then
-    ``run_write`` when the compiled monitor writes a Parquet output block by block,
-    otherwise ``monitor_run`` and ``write``: ``benchmarks/bench_run_cli.py`` times
-    them)."""
+    ``kernel_setup`` and ``run_write`` when the compiled monitor writes a Parquet output
+    block by block, otherwise ``monitor_run`` and ``write``:
+    ``benchmarks/bench_run_cli.py`` times them)."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.anyread import read_any
     from grfguard.io.logio import write_log
@@ -367,7 +367,7 @@ def _run_monitor(
     if batch:
         from grfguard.io.runwriter import write_run
 
-        n = write_run(mon, df, output)
+        n = write_run(mon, df, output, phase=mark)
         if n is not None:
             return n
     return mon.run(df)
