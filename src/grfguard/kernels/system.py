@@ -461,7 +461,7 @@ def _zeros_update(yp, ys, ss, x, tot, cref, cest):
         # SwingZeroLearner._in_air: the readings less the zeros so far sum to ~0
         s = 0.0
         for i in range(4 * f, 4 * f + 4):
-            if math.isfinite(x[i]):
+            if math.isfinite(x[i]) and ss[i, FLAG] == 0.0:
                 n = ys[S_ZN + i]
                 s += x[i] - (ys[S_ZSUM + i] / n if n > 0 else 0.0)
         if not abs(s) <= yp[Y_Z_AIR]:
