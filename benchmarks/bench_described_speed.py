@@ -1,26 +1,33 @@
 """Described robots (Talos: ankle F/T, G1: corner cells): batch speed of the virtual foot
-wrenches and of the whole described monitor, compiled inverse dynamics against the
-per-sample MuJoCo path (issue 11, must-show 2: >= 300 k samples/s on a 30-joint robot,
-kinematics included).
+wrenches and of the whole described monitor, stage by stage (issue 11, must-show 2:
+>= 300 k samples/s on a 30-joint robot, kinematics included).
 
 For each robot, on a noisy simulated walk (default noise, seed 1) at 1 kHz:
 
-* ``estimate_wrenches`` (compiled, the default) and ``estimate_wrenches(compiled=False)``
-  (per-sample ``mj_kinematics``, ``mj_comPos``, ``mj_comVel``, ``mj_rne``, ``mj_jacSite``,
-  ``mj_rnePostConstraint`` from Python: the reference), alternated in one process;
-* ``run_described`` (virtual wrenches, then the channel monitor (Talos) or the corner
-  monitor with tracking (G1)) with either path;
-* the largest difference of their outputs [N, N m].
+* ``estimate_wrenches`` split into its stages (exclusive CPU time of the module's stage
+  functions: Savitzky-Golay filters, first kinematics pass, stance weights, attitude,
+  base motion, inverse dynamics, the rest);
+* the monitor stage alone on the log with its virtual channels (Talos:
+  ``ChannelMonitor.run``; G1: the corner monitor with tracking, ``run_described`` on a
+  log that already has its ``vfs_*`` columns);
+* ``run_described`` whole (virtual wrenches, then the monitor).
 
-Figures are process CPU time (``time.process_time``), the best of ``--repeats`` runs (the
-reference: of ``--ref-repeats``), samples/s = samples / CPU seconds; the load average is
-stated. Kernels are compiled (or loaded from the cache) before timing.
+``--before-src DIR``: the same measurements with the package sources of ``DIR`` (e.g. a
+``git archive`` of the previous commit; run in a subprocess with ``PYTHONPATH=DIR/src``),
+in the same session, and the largest difference between its ``run_described`` outputs
+and this tree's. Also measured here: the per-sample MuJoCo reference of the wrenches
+(``estimate_wrenches(compiled=False)``) and the pure-Python channel monitor
+(``tests/reference/channels.py``), with their output differences.
+
+Figures are process CPU time (``time.process_time``), the best of ``--repeats`` runs;
+samples/s = samples / CPU seconds; the load average is stated. Kernels are compiled (or
+loaded from the cache) before timing.
 
 Updates the ``## Described robots: compiled inverse dynamics (issue 11)`` section of
-BENCHMARKS.md.
+BENCHMARKS.md (keeps the section's earlier tables under "Earlier runs").
 
 Usage: ``.venv/bin/python benchmarks/bench_described_speed.py [--duration 20]
-[--repeats 5] [--ref-repeats 2] [--no-write]``
+[--repeats 3] [--ref-repeats 1] [--before-src DIR] [--no-write]``
 """
 
 from __future__ import annotations
@@ -32,55 +39,69 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import datetime  # noqa: E402
+import json  # noqa: E402
 import platform  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _common import update_section  # noqa: E402
+import pandas as pd  # noqa: E402
 
 import grfguard.estimate.wrench as wrench  # noqa: E402
-from grfguard.estimate.described import run_described  # noqa: E402
+from grfguard.estimate.described import run_described, with_described_vfs  # noqa: E402
 from grfguard.model.description import load_description  # noqa: E402
 from grfguard.model.loader import load_model  # noqa: E402
 from grfguard.sim.config import NoiseConfig  # noqa: E402
 from grfguard.sim.wholebody import scaled_gait, simulate_robot  # noqa: E402
 
 SECTION = "## Described robots: compiled inverse dynamics (issue 11)"
+HERE = Path(__file__).resolve().parent
 _COMPILED = wrench.estimate_wrenches
 
-
-#: Analysis written with the figures (kept in the section when the script re-runs).
-NOTES = """
-Where the time goes (Talos, 20,000 samples, `cProfile` of `estimate_wrenches` and
-`run_described` on 2026-11-26 under load 6-11, shares of the profiled time): the compiled
-inverse dynamics (`wrench_batch`: kinematics of 60 bodies, `cdof`, velocities,
-accelerations, body forces, the sole and F/T wrenches) 39 %; the Savitzky-Golay filters
-(101 taps at 1 kHz on 32 joints x 3 derivative orders, the soles, the gyro; scipy's
-`correlate1d`) 24 %; the first kinematics pass (`frames_batch`: IMU and soles with the
-base at identity) 11 %; the SVD that orthonormalises the leveled attitude 8 %; array
-assembly and the rest 18 %. In `run_described`, the Talos channel monitor
-(`grfguard.detect.channels.ChannelMonitor.run`, pure Python per sample: 12 channel steps
-per sample) takes about as long as the virtual wrenches or longer.
-
-Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
-kinematics included): **not met.** The virtual wrenches went from 5-12 k to 25-45 k
-samples/s of CPU time (the figure moves with the load: G1's whole-monitor row coming out
-faster than its wrenches alone is that noise); the whole Talos monitor to 13-18 k/s. Left:
-(1) the channel monitor compiled (Python per sample today); (2) the Savitzky-Golay filters
-(a 101-tap correlation per column and order; an FFT or recursive form, or one compiled
-pass computing q, q', q'' together; a plain numba loop tap by tap was tried and ran
-1.4-2.6x slower than scipy's `correlate1d`, not vectorised); (3) the inverse dynamics
-itself, about 10 µs per sample for Talos's 60 bodies (28 of them welded to their parent:
-summing their inertias into the parent's was tried and gained nothing measurable; the
-arithmetic is MuJoCo's ~250 flops per body); (4) the leveled attitude's SVD (a closed
-form). 300 k/s is 3.3 µs per sample for everything: the kinematics of 60 bodies alone take
-about 3 µs.
-"""
+#: Stage functions of :mod:`grfguard.estimate.wrench` timed (exclusive time; a missing
+#: name is skipped, so the script also times older sources).
+STAGES = {
+    "Savitzky-Golay filters": ("_deriv", "_derivs", "_deriv_many"),
+    "first kinematics (`frames_batch`)": ("_body_frames_compiled",),
+    "stance weights": ("_stance_weights",),
+    "attitude (leveled)": ("_attitude",),
+    "base motion (w/o filters)": ("_base_motion",),
+    "inverse dynamics (`wrench_batch`)": ("_inverse_dynamics_compiled",),
+}
 
 
-def _reference(*args, **kwargs):
-    return _COMPILED(*args, compiled=False, **kwargs)
+class _Timers:
+    """Exclusive CPU time of wrapped module functions (nested wrapped calls excluded)."""
+
+    def __init__(self, module, names: dict[str, tuple[str, ...]]) -> None:
+        self.module, self.acc, self.stack, self.saved = module, {}, [], {}
+        for stage, fns in names.items():
+            self.acc[stage] = 0.0
+            for fn in fns:
+                if hasattr(module, fn):
+                    self.saved[fn] = getattr(module, fn)
+                    setattr(module, fn, self._wrap(stage, self.saved[fn]))
+
+    def _wrap(self, stage, f):
+        def g(*a, **k):
+            c0 = time.process_time()
+            self.stack.append(0.0)
+            try:
+                return f(*a, **k)
+            finally:
+                inner = self.stack.pop()
+                dt = time.process_time() - c0
+                self.acc[stage] += dt - inner
+                if self.stack:
+                    self.stack[-1] += dt
+        return g
+
+    def restore(self) -> None:
+        for fn, f in self.saved.items():
+            setattr(self.module, fn, f)
 
 
 def _cpu(fn, repeats: int):
@@ -92,70 +113,187 @@ def _cpu(fn, repeats: int):
     return best, out
 
 
-def _max_diff(a, b) -> float:
-    cols = [c for c in a.columns if a[c].dtype.kind == "f" and c in b.columns]
-    return max(float(np.nanmax(np.abs(a[c].to_numpy() - b[c].to_numpy()), initial=0.0))
-               for c in cols)
+def _wrench_stages(df, r, repeats: int) -> dict[str, float]:
+    """Best whole ``estimate_wrenches`` of ``repeats`` and its stages' exclusive times."""
+    best: dict[str, float] = {"`estimate_wrenches`, whole": float("inf")}
+    for _ in range(repeats):
+        tm = _Timers(wrench, STAGES)
+        try:
+            c0 = time.process_time()
+            wrench.estimate_wrenches(df, r)
+            tot = time.process_time() - c0
+        finally:
+            tm.restore()
+        if tot < best["`estimate_wrenches`, whole"]:
+            best = {**tm.acc, "rest of `estimate_wrenches`": tot - sum(tm.acc.values()),
+                    "`estimate_wrenches`, whole": tot}
+    return best
 
 
-def robot_rows(name: str, duration: float, repeats: int, ref_repeats: int) -> list[list[str]]:
+def _channel_monitor(name: str):
+    from importlib import resources
+
+    from grfguard.detect.channels import ChannelConfig, ChannelMonitor
+
+    f = resources.files("grfguard") / "data" / f"{name}_channels.toml"
+    return ChannelMonitor(ChannelConfig.from_toml_text(f.read_text()))
+
+
+def measure(name: str, duration: float, repeats: int, dump: str | None) -> dict:
+    """Stage times of this interpreter's package on ``name``'s walk."""
+    r = load_model(load_description(name))
+    df = simulate_robot(r, scaled_gait(r, duration=duration), NoiseConfig(), seed=1)
+    _COMPILED(df.iloc[:500], r)  # compile / load the kernels
+    run_described(df.iloc[:2000], robot=r)
+    res = _wrench_stages(df, r, repeats)
+    log = with_described_vfs(df, r)
+    if r.description.sensing == "ft":
+        cm = _channel_monitor(name)
+        res["channel monitor (`ChannelMonitor.run`)"] = _cpu(lambda: cm.run(log), repeats)[0]
+    else:
+        res["corner monitor + tracking"] = _cpu(lambda: run_described(log, robot=r),
+                                                repeats)[0]
+    t_all, out = _cpu(lambda: run_described(df, robot=r), repeats)
+    res["`run_described`, whole"] = t_all
+    if dump:
+        out.to_pickle(dump)
+    return {"n": len(df), "joints": len(r.joint_names), "bodies": r.model.nbody - 1,
+            "stages": res}
+
+
+def _max_diff(a: pd.DataFrame, b: pd.DataFrame) -> str:
+    """Largest difference of the float columns [N, N m, s]; other columns compared
+    for equality."""
+    d, other = 0.0, 0
+    for c in a.columns:
+        if c not in b.columns:
+            continue
+        x, y = a[c].to_numpy(), b[c].to_numpy()
+        if a[c].dtype.kind == "f":
+            both = np.isnan(x) & np.isnan(y)
+            if (np.isnan(x) != np.isnan(y)).any():
+                return "NaN pattern differs in " + c
+            d = max(d, float(np.max(np.abs(x[~both] - y[~both]), initial=0.0)))
+        else:
+            other += int((x != y).sum())
+    return f"{d:.1e}" + ("" if other == 0 else f" ({other} flags/kinds differ)")
+
+
+def references(name: str, duration: float, ref_repeats: int) -> list[str]:
+    """The MuJoCo reference of the wrenches and the Python channel monitor, timed."""
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from reference.channels import PyChannelMonitor
+
     r = load_model(load_description(name))
     df = simulate_robot(r, scaled_gait(r, duration=duration), NoiseConfig(), seed=1)
     n = len(df)
-    _COMPILED(df.iloc[:500], r)  # compile / load the kernels
-    new_t, new = _cpu(lambda: _COMPILED(df, r), repeats)
-    old_t, old = _cpu(lambda: _reference(df, r), ref_repeats)
-    d_est = max(float(np.abs(new.ground - old.ground).max()),
-                *(float(np.abs(new.sensor[k] - old.sensor[k]).max()) for k in new.sensor))
-    run_described(df.iloc[:2000], robot=r)  # warm the monitor's kernels
-    mon_t, mon = _cpu(lambda: run_described(df, robot=r), repeats)
-    wrench.estimate_wrenches = _reference  # with_described_vfs looks it up at call time
-    try:
-        mref_t, mref = _cpu(lambda: run_described(df, robot=r), ref_repeats)
-    finally:
-        wrench.estimate_wrenches = _COMPILED
-    d_mon = _max_diff(mon, mref)
-    joints = len(r.joint_names)
-    rows = []
-    for stage, t_new, t_old, diff in (("`estimate_wrenches`", new_t, old_t, d_est),
-                                      ("`run_described`, whole", mon_t, mref_t, d_mon)):
-        rows.append([name, str(joints), str(r.model.nbody - 1), stage, f"{n}",
-                     f"{1e6 * t_old / n:.1f}", f"{1e6 * t_new / n:.2f}",
-                     f"{n / t_old / 1e3:.1f} k", f"{n / t_new / 1e3:.0f} k",
-                     f"{t_old / t_new:.1f}x", f"{diff:.1e}"])
-    return rows
+    lines = []
+    new = _COMPILED(df, r)
+    old_t, old = _cpu(lambda: _COMPILED(df, r, compiled=False), ref_repeats)
+    d = max(float(np.abs(new.ground - old.ground).max()),
+            *(float(np.abs(new.sensor[k] - old.sensor[k]).max()) for k in new.sensor))
+    lines.append(f"{name}: per-sample MuJoCo `estimate_wrenches(compiled=False)` "
+                 f"{1e6 * old_t / n:.1f} µs/sample ({n / old_t / 1e3:.1f} k samples/s), "
+                 f"largest difference to the compiled wrenches {d:.1e} N, N m")
+    if r.description.sensing == "ft":
+        log = with_described_vfs(df, r)
+        cm = _channel_monitor(name)
+        py = PyChannelMonitor(cm.config)
+        py_t, py_out = _cpu(lambda: py.run(log), ref_repeats)
+        lines.append(f"{name}: pure-Python channel monitor (tests/reference/channels.py) "
+                     f"{1e6 * py_t / n:.1f} µs/sample ({n / py_t / 1e3:.1f} k samples/s), "
+                     f"largest difference to the compiled one {_max_diff(cm.run(log), py_out)}")
+    return lines
+
+
+def _before(src: str, duration: float, repeats: int, tmp: str) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(Path(src).resolve() / "src")}
+    out = subprocess.run([sys.executable, __file__, "--json-out", f"{tmp}/before.json",
+                          "--dump-dir", tmp, "--duration", str(duration), "--repeats",
+                          str(repeats)], env=env, check=True, capture_output=True, text=True)
+    print(out.stderr[-2000:], file=sys.stderr)
+    return json.loads(Path(f"{tmp}/before.json").read_text())
+
+
+def _table(after: dict, before: dict | None, diffs: dict[str, str]) -> str:
+    head = ("| robot | stage | samples | before: µs/sample (CPU) | after: µs/sample (CPU) | "
+            "before: samples/s | after: samples/s | speed-up | max output difference "
+            "(before vs after) |\n|---|---|---|---|---|---|---|---|---|")
+    rows = [head]
+    for name, a in after.items():
+        n = a["n"]
+        for stage, t in a["stages"].items():
+            b = before[name]["stages"].get(stage) if before else None
+            rows.append("| " + " | ".join([
+                f"{name} ({a['joints']} joints, {a['bodies']} bodies)", stage, str(n),
+                f"{1e6 * b / n:.2f}" if b else "-", f"{1e6 * t / n:.2f}",
+                f"{n / b / 1e3:.0f} k" if b else "-", f"{n / t / 1e3:.0f} k",
+                f"{b / t:.1f}x" if b else "-",
+                diffs.get(name, "-") if stage.startswith("`run_described`") else ""]) + " |")
+    return "\n".join(rows)
+
+
+def _args(argv):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=20.0, help="walk length [s]")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--ref-repeats", type=int, default=1)
+    ap.add_argument("--before-src", default=None, help="package sources to time as 'before'")
+    ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--json-out", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--dump-dir", default=None, help=argparse.SUPPRESS)
+    return ap.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=20.0, help="walk length [s]")
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--ref-repeats", type=int, default=2)
-    ap.add_argument("--no-write", action="store_true")
-    a = ap.parse_args(argv)
+    a = _args(argv)
+    robots = ("talos", "g1")
+    if a.json_out:  # the 'before' subprocess
+        res = {nm: measure(nm, a.duration, a.repeats, f"{a.dump_dir}/{nm}.pkl")
+               for nm in robots}
+        Path(a.json_out).write_text(json.dumps(res))
+        return
     load0 = os.getloadavg()[0]
-    rows = [row for name in ("talos", "g1")
-            for row in robot_rows(name, a.duration, a.repeats, a.ref_repeats)]
+    with tempfile.TemporaryDirectory() as tmp:
+        before = _before(a.before_src, a.duration, a.repeats, tmp) if a.before_src else None
+        after = {nm: measure(nm, a.duration, a.repeats, f"{tmp}/{nm}.after.pkl")
+                 for nm in robots}
+        diffs = {nm: _max_diff(pd.read_pickle(f"{tmp}/{nm}.after.pkl"),
+                               pd.read_pickle(f"{tmp}/{nm}.pkl")) for nm in robots} \
+            if before else {}
+    refs = [ln for nm in robots for ln in references(nm, a.duration, a.ref_repeats)] \
+        if a.ref_repeats > 0 else []
     load1 = os.getloadavg()[0]
-    head = ("| robot | joints | bodies | stage | samples | before: µs/sample (CPU) | "
-            "after: µs/sample (CPU) | before: samples/s | after: samples/s | speed-up | "
-            "max output difference [N, N m] |\n|---|---|---|---|---|---|---|---|---|---|---|")
-    table = "\n".join([head] + ["| " + " | ".join(r) + " |" for r in rows])
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     cmd = "taskset -c 1 .venv/bin/python benchmarks/bench_described_speed.py " + " ".join(
         sys.argv[1:] if argv is None else argv)
     body = (
         f"Command: `{cmd.strip()}` ({now}; {platform.processor() or platform.machine()}, "
         f"Python {platform.python_version()}; load average {load0:.1f} -> {load1:.1f} on the "
-        f"shared 2-core machine: CPU times are the figures, wall times would be inflated). "
-        f"Noisy {a.duration:g} s walks at 1 kHz (seed 1). \"Before\": the per-sample MuJoCo "
-        "path (`estimate_wrenches(compiled=False)`, kept as the reference); \"after\": "
-        "the compiled kinematics and inverse dynamics (`grfguard.kernels.rne`), timed in "
-        f"the same process. Best CPU time of {a.repeats} (after) / {a.ref_repeats} (before) "
-        "runs.\n\n" + table + "\n" + NOTES)
+        f"shared 2-core machine: CPU times are the figures). Noisy {a.duration:g} s walks "
+        f"at 1 kHz (seed 1). Best CPU time of {a.repeats} runs; stage rows are exclusive "
+        "times of `grfguard.estimate.wrench`'s stage functions in the best whole run. "
+        + ("\"Before\": the sources of `" + a.before_src + "` timed in a subprocess of the "
+           "same run; \"after\": this tree." if before else "") + "\n\n"
+        + _table(after, before, diffs) + "\n\n" + "\n".join(f"- {ln}" for ln in refs) + "\n")
     print(body)
     if not a.no_write:
-        update_section(SECTION, body)
+        _write(body)
+
+
+def _write(body: str) -> None:
+    """The new figures first, the section's previous text under "Earlier runs"."""
+    import re
+
+    from _common import BENCHMARKS_MD, update_section
+
+    m = re.search(rf"^{re.escape(SECTION)}\n(.*?)(?=^## |\Z)", BENCHMARKS_MD.read_text(),
+                  re.S | re.M)
+    prev = m.group(1).strip() if m else ""
+    mark = "### Earlier runs"
+    latest, _, older = prev.partition(mark)
+    earlier = (latest.strip() + "\n\n" + older.strip()).strip()
+    update_section(SECTION, body + (f"\n{mark}\n\n{earlier}\n" if earlier else ""))
 
 
 if __name__ == "__main__":

@@ -143,3 +143,73 @@ def test_tracking_without_a_robot_name_weighs_by_the_virtual_feet(g1, g1_vfs) ->
     err = out["recovered_r2"].to_numpy()[late] - out["true_force_r2"].to_numpy()[late]
     assert out["flag_r2"].to_numpy()[late].all()
     assert np.sqrt(np.mean(err**2)) <= 0.005 * _weight(g1)
+
+
+def test_monitor_takes_g1s_own_mass_and_sole(g1, g1_vfs) -> None:
+    """`Monitor.for_log` on a G1 log: G1's weight and corner layout in the input guards,
+    the common-mode fit, the swing-zero learner and the standing layer (no SURALP
+    stand-in); a log that names no robot is refused."""
+    from grfguard.errors import LogFormatError
+    from grfguard.model.robot import SURALP
+    from grfguard.pipeline import Monitor
+
+    m = Monitor.for_log(g1_vfs, MonitorConfig())
+    assert m.robot.mass == pytest.approx(g1.mass)
+    sole = g1.description.feet[0]
+    assert np.allclose(m.robot.sensor_positions_in_foot(), sole.corners_in_sole())
+    W = m.robot.weight
+    assert W == pytest.approx(_weight(g1), rel=1e-3)
+    assert m.inputs.force_lo == pytest.approx(-0.25 * W)
+    assert m.inputs.vfs_force_lo == pytest.approx(-3.0 * W)
+    assert m.common is not None and m.zeros is not None and m.standing is not None
+    assert m.common.robot is m.robot and m.common.outlier_n == pytest.approx(0.0179 * W, 1e-3)
+    assert m.zeros.limit_n == pytest.approx(0.0179 * W, rel=1e-3)
+    assert m.standing.detector.threshold_n == pytest.approx(15.0 * W / SURALP.weight)
+    assert Monitor.for_log(g1_vfs, MonitorConfig(), robot=g1).robot.mass == g1.mass
+    bare = g1_vfs.copy()
+    bare.attrs = {}
+    with pytest.raises(LogFormatError, match="names no robot"):
+        Monitor.for_log(bare, MonitorConfig())
+
+
+def test_g1_virtual_corners_below_the_reading_range_are_not_rejected(g1, g1_vfs) -> None:
+    """G1's virtual corners go below a reading's -0.25 m g (a minimum-norm split of the
+    foot's wrench); the guard keeps them, so a fault-free G1 walk has no
+    ``input_invalid`` sample and the compiled monitor equals the Python stages."""
+    from grfguard.pipeline import Monitor
+
+    W = _weight(g1)
+    v = g1_vfs[[f"vfs_{s}" for s in SENSOR_NAMES]].to_numpy()
+    assert (v < -0.25 * W).any()  # what the reading range would reject
+    outs = [Monitor.for_log(g1_vfs, MonitorConfig(), compiled=c).run(g1_vfs)
+            for c in (True, False)]
+    for out in outs:
+        assert (out["system_state"] == "ok").all(), out["system_state"].value_counts()
+    a, b = outs
+    for c in a.columns:
+        if c.startswith(("flag_", "recovered_", "eta_")):
+            assert np.array_equal(a[c].to_numpy(float), b[c].to_numpy(float), equal_nan=True), c
+        elif c.startswith(("kind_", "system_", "model_mismatch")):
+            assert list(a[c]) == list(b[c]), c
+
+
+def test_g1_swing_zeros_of_healthy_cells_are_about_zero(g1, g1_vfs) -> None:
+    """G1's planned swing ends after its heel lands: the learner takes only the samples
+    whose readings say the foot is in the air, so the zeros of healthy cells are the
+    noise's mean (|zero| < 0.5 N), the same compiled and in Python, and nothing is
+    subtracted from the readings."""
+    from grfguard.kernels.system import S_ZN, S_ZSUM
+    from grfguard.pipeline import Monitor
+
+    py = Monitor.for_log(g1_vfs, MonitorConfig(), compiled=False)
+    py.run(g1_vfs)
+    zp = py.zeros._sum / py.zeros._n
+    assert (py.zeros._n > 0).all()
+    assert np.abs(zp).max() < 0.5, zp
+    mon = Monitor.for_log(g1_vfs, MonitorConfig())
+    out = mon.run(g1_vfs)
+    k = mon._kernel(True, True)
+    zc = k.syss[S_ZSUM:S_ZSUM + 8] / k.syss[S_ZN:S_ZN + 8]
+    assert np.array_equal(zc, zp)
+    for s in SENSOR_NAMES:
+        assert np.array_equal(out[f"recovered_{s}"].to_numpy(), out[f"force_{s}"].to_numpy()), s

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.signal import butter, lfilter_zi
 
-from grfguard._iir import butter_lowpass
+from grfguard._iir import butter_highpass, butter_lowpass
 from grfguard._iir import lfilter_zi as np_lfilter_zi
 
 
@@ -47,6 +47,41 @@ def test_monitor_import_does_not_load_scipy_signal() -> None:
             "VirtualForceSensor(); "
             "print(sorted(m for m in ('scipy.signal', 'matplotlib', 'plotly') "
             "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
+
+
+@pytest.mark.parametrize("order", range(1, 9))
+def test_butter_highpass_equals_scipy_bitwise(order: int) -> None:
+    for wn in [*np.geomspace(1e-4, 0.999, 40), 0.002, 0.5, 0.95]:
+        b, a = butter(order, wn, "highpass")
+        b2, a2 = butter_highpass(order, wn)
+        assert b2.dtype == b.dtype and a2.shape == a.shape
+        assert np.array_equal(b, b2) and np.array_equal(a, a2), (order, wn)
+    for wn in (0.0, -0.1, 1.0, 1.5):
+        with pytest.raises(ValueError):
+            butter(order, wn, "highpass")
+        with pytest.raises(ValueError):
+            butter_highpass(order, wn)
+
+
+def test_monitor_run_does_not_load_scipy(tmp_path) -> None:
+    """``grfguard run``'s set-up and run (the vibration switch of the system layer
+    included) import neither scipy.signal nor scipy.stats (about a second of CPU; numba
+    itself imports scipy.linalg to look for BLAS)."""
+    from grfguard.io.logio import write_log
+    from grfguard.sim import simulate
+    from grfguard.sim.config import GaitConfig
+
+    path = tmp_path / "walk.parquet"
+    write_log(simulate(gait=GaitConfig(duration=2.5), seed=0), path)
+    code = ("import sys; from grfguard.io.logio import load_log; "
+            "from grfguard.pipeline import Monitor; "
+            f"log = load_log({str(path)!r}); m = Monitor.for_log(log); "
+            "assert m.vibration is not None and m.common is not None; m.run(log); "
+            "print(sorted(m for m in sys.modules if m.startswith(('scipy.signal', "
+            "'scipy.stats', 'scipy.interpolate', 'scipy.optimize'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"

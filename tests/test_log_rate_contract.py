@@ -89,10 +89,10 @@ def test_standing_detector_needs_the_sampling_period() -> None:
         StandingDetector()  # type: ignore[call-arg]
     for bad in (0.0, -0.01, math.nan, "0.01", True):
         with pytest.raises(ConfigError, match="dt_s"):
-            StandingDetector(bad)  # type: ignore[arg-type]
+            StandingDetector(bad, weight_n=SURALP.weight)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="dt_s"):
-        StandingStage(0.0)
-    st = StandingStage(0.01)
+        StandingStage(0.0, weight_n=SURALP.weight)
+    st = StandingStage(0.01, weight_n=SURALP.weight)
     assert st.detector.dt_s == 0.01
     # the 100 Hz filter constants are the continuous ones sampled at 10 ms
     c = st.detector.config

@@ -90,6 +90,19 @@ def test_force_range_scales_with_the_robot() -> None:
     assert "above" in PlausibilityChecker(SMALL).check_value("force_l1", 2500.0)
 
 
+def test_virtual_corners_have_a_wider_lower_bound() -> None:
+    """A virtual corner force may be negative (a corner split of a CoP near the sole's
+    edge), a load cell's reading may not: -0.5 m g is plausible for ``vfs_<s>`` only."""
+    chk = PlausibilityChecker(SURALP)
+    W = SURALP.weight
+    assert chk.ranges.vfs_force_lo == pytest.approx(-3 * W)
+    assert chk.check_value("vfs_r1", -0.5 * W) is None
+    assert "below" in chk.check_value("force_r1", -0.5 * W)
+    assert "below" in chk.check_value("recovered_r1", -0.5 * W)
+    assert "below" in chk.check_value("vfs_l4", -3.5 * W)
+    assert chk.check_value("vfs_total_r", -0.5 * W) is None  # not a corner: no range here
+
+
 def test_units_mistakes_are_implausible(walks) -> None:
     """Joint angles in degrees; a quaternion that is not a unit quaternion."""
     df = walks["suralp"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
@@ -15,6 +16,7 @@ from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.guard import SYSTEM_STATES
 from grfguard.io.codes import codes_to_categorical, codes_to_str, strings_to_str
 from grfguard.io.logio import read_log, write_log
+from grfguard.io.runwriter import write_run
 from grfguard.kernels.detect import KIND_NAMES
 from grfguard.model.robot import SURALP
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
@@ -89,7 +91,8 @@ def test_written_logs_round_trip_with_split_floats(tmp_path) -> None:
            for i in range(meta.num_columns)}
     assert "BYTE_STREAM_SPLIT" in enc["x"] and "BYTE_STREAM_SPLIT" in enc["f32"]
     assert "RLE_DICTIONARY" in enc["s"] and "BYTE_STREAM_SPLIT" not in enc["k"]
-    assert meta.column(0).compression == "ZSTD"
+    assert meta.column(0).compression == "LZ4"
+    assert meta.column(0).is_stats_set and not meta.column(1).is_stats_set  # time only
 
 
 def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
@@ -97,7 +100,7 @@ def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
     out = tmp_path / "out.parquet"
     marks: list[str] = []
     n = run_log(path, out, phase=marks.append)
-    assert marks == ["read", "checks", "monitor_setup", "monitor_run", "write"]
+    assert marks == ["read", "checks", "monitor_setup", "run_write"]  # block by block
     got = read_log(out)
     assert n == len(got)
     log = read_log(path)
@@ -117,3 +120,53 @@ def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
     assert (got["system_reason"] != "").sum() > 5
     kinds = set().union(*(set(got[c]) for c in got.columns if c.startswith("kind_")))
     assert "frozen" in kinds and len(kinds - {"none"}) >= 2, kinds  # several names
+
+
+def _same_bits(a: pa.ChunkedArray, b: pa.ChunkedArray) -> bool:
+    """Same type, same nulls, same values (floats compared bit for bit)."""
+    x, y = a.combine_chunks(), b.combine_chunks()
+    if x.type != y.type or x.null_count != y.null_count:
+        return False
+    if x.null_count and not x.is_null().equals(y.is_null()):
+        return False
+    if pa.types.is_floating(x.type):
+        xv, yv = x.fill_null(0.0).to_numpy(), y.fill_null(0.0).to_numpy()
+        return bool(np.array_equal(xv.view(np.int64), yv.view(np.int64)))
+    return x.equals(y)
+
+
+@pytest.mark.parametrize("rows", [1 << 17, 777])
+def test_block_writer_equals_the_frame_path(bad_walk, tmp_path, rows) -> None:
+    """``write_run`` (the compiled monitor's arrays straight to Parquet, block by block)
+    writes the file ``write_log(Monitor.run(log))`` writes: the same schema and metadata,
+    every column equal bit for bit (nulls where the frame had NaN), also across blocks
+    of 777 rows (the gap, the rejected IMU samples and the faults fall in different
+    blocks) and when the log already carries output columns (replaced in place)."""
+    path, _ = bad_walk
+    log = read_log(path, copy=False)
+    again = Monitor.for_log(log).run(log)  # a log that carries the outputs already
+    again = again.drop(columns=["system_reason"])
+    again.attrs = dict(log.attrs)
+    for src in (log, again):
+        new, old = tmp_path / "new.parquet", tmp_path / "old.parquet"
+        assert write_run(Monitor.for_log(src), src, new, rows=rows) == len(src)
+        write_log(Monitor.for_log(src).run(src), old)
+        a, b = pq.read_table(new), pq.read_table(old)
+        assert a.schema.equals(b.schema, check_metadata=True)
+        assert a.column_names == b.column_names and a.num_rows == b.num_rows == len(src)
+        bad = [c for c in b.column_names if not _same_bits(a[c], b[c])]
+        assert not bad, bad
+        if rows < len(src):
+            assert pq.ParquetFile(new).metadata.num_row_groups == -(-len(src) // rows)
+    assert set(b.column("system_state").to_pylist()) >= {"ok", "time_gap", "input_invalid"}
+    assert b.column("force_l4").null_count > 0  # the dropout: NaN written as null
+
+
+def test_block_writer_leaves_the_python_stages_to_the_frame_path(bad_walk, tmp_path) -> None:
+    path, _ = bad_walk
+    log = read_log(path, copy=False)
+    out = tmp_path / "none.parquet"
+    assert write_run(Monitor.for_log(log, compiled=False), log, out) is None
+    assert not out.exists()
+    n = run_log(path, out, compiled=False)  # the frame path of the command
+    assert n == len(read_log(out)) == len(log)

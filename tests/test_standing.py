@@ -15,7 +15,7 @@ from grfguard.errors import ConfigError
 from grfguard.estimate.vfs import with_vfs_columns
 from grfguard.evaluate.detection import evaluate_detection
 from grfguard.faults.inject import inject_faults
-from grfguard.model.robot import SENSOR_NAMES
+from grfguard.model.robot import SENSOR_NAMES, SURALP
 from grfguard.sim import GaitConfig, simulate
 
 FLAGS = [f"flag_{s}" for s in SENSOR_NAMES]
@@ -92,7 +92,8 @@ def test_no_false_alarm_over_60_s_of_standing():
 
 
 def test_standing_detector_resets_when_a_foot_lifts_or_the_weight_shifts():
-    det = StandingDetector(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01))
+    det = StandingDetector(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01),
+                           weight_n=SURALP.weight)
     for _ in range(30):
         det.update([100.0] * 8, [100.0] * 8, True, [400.0, 400.0])
     assert det.standing
@@ -105,15 +106,27 @@ def test_standing_detector_resets_when_a_foot_lifts_or_the_weight_shifts():
     assert det.standing
     det.update([100.0] * 8, [100.0] * 8, True, [350.0, 450.0])  # 50 N > 3 % of 800 N
     assert not det.standing
-    with pytest.raises(ConfigError, match="threshold_n"):
-        StandingConfig(threshold_n=-1.0)
+    with pytest.raises(ConfigError, match="threshold_fraction"):
+        StandingConfig(threshold_fraction=-1.0)
+    with pytest.raises(ConfigError, match="weight_n"):
+        StandingDetector(0.001, weight_n=0.0)
+
+
+def test_standing_threshold_is_a_fraction_of_the_weight(g1) -> None:
+    """15 N on SURALP exactly (its outputs unchanged), the same fraction of G1's weight;
+    the monitor gives the layer its robot's weight."""
+    assert StandingDetector(0.001, weight_n=SURALP.weight).threshold_n == 15.0
+    light = StandingStage(0.001, weight_n=g1.mass * 9.81).detector.threshold_n
+    assert light == pytest.approx(15.0 * g1.mass * 9.81 / SURALP.weight)
+    assert 4.0 < light < 5.0
 
 
 def test_stage_holds_the_flag_until_both_feet_have_swung():
     """After the stand, the flag is held until the sensor's foot and then the other foot
     have completed a swing (the per-sensor tests had their chance), unless the detector
     flags the sensor first."""
-    stage = StandingStage(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01))
+    stage = StandingStage(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01),
+                          weight_n=SURALP.weight)
     x, v = [100.0] * 8, [100.0] * 8
     both, right_up, left_up = [1.0, 1.0], [0.0, 1.0], [1.0, 0.0]
 
@@ -142,7 +155,8 @@ def test_held_flag_tells_a_gain_from_an_offset_once_the_load_changes():
     """Standing, a gain of 1.5 on a 100 N load reads like a +50 N offset; when the foot
     lifts, a gain reads zero (an offset would read 50 N): the held flag becomes a gain and
     the recovered force follows the load."""
-    stage = StandingStage(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01))
+    stage = StandingStage(0.001, StandingConfig(settle_s=0.01, baseline_s=0.01),
+                          weight_n=SURALP.weight)
     v = [100.0] * 8
 
     def step(xx, vv, c):

@@ -98,3 +98,21 @@ def test_system_limits_are_fractions_of_the_weight() -> None:
     light = RobotConfig(mass=SURALP.mass / 4)
     assert SwingZeroLearner(light, 0.001).limit_n == pytest.approx(5.0)
     assert CommonModeMonitor(light, 0.001).outlier_n == pytest.approx(5.0)
+
+
+def test_swing_zeros_are_learned_only_while_the_foot_is_in_the_air() -> None:
+    """A planned swing whose foot lands early (its heel cells read load in the last part
+    of the swing, as G1's do) teaches no zero: only samples whose readings, less the zeros
+    learned so far, sum within ``air_fraction`` of the weight count."""
+    from grfguard.detect.system import SwingZeroLearner
+
+    z = SwingZeroLearner(SURALP, 0.001)
+    zero = [4.0, -3.5, 5.0, 6.0]  # load-cell zero errors of the right sole
+    swing, stance = [False, True], [0.0, 600.0]
+    for k in range(1200):  # 1.2 s of planned swing; the heel lands at 0.7 s
+        heel = 0.0 if k < 700 else 300.0
+        x = [zero[0], zero[1], zero[2] + heel, zero[3] + heel] + [150.0] * 4
+        z.update(x, stance, swing, [False] * 8)
+    assert z._n[0] == pytest.approx(600.0, abs=1.0)  # 0.7 s less the 0.1 s settling
+    assert z.zeros_n[:4] == pytest.approx(zero)  # the heel's load was not learned
+    assert z.air_n == pytest.approx(0.05 * SURALP.weight)

@@ -1,4 +1,4 @@
-"""Butterworth low-pass design without importing :mod:`scipy.signal`.
+"""Butterworth low- and high-pass design without importing :mod:`scipy.signal`.
 
 ``scipy.signal`` takes about one second of CPU to import (it pulls in most of scipy),
 which was a third of ``grfguard run``'s start-up although the monitor needs only the
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["butter_lowpass", "lfilter_zi"]
+__all__ = ["butter_lowpass", "butter_highpass", "lfilter_zi"]
 
 
 def _poly(zeros: np.ndarray) -> np.ndarray:
@@ -38,16 +38,33 @@ def butter_lowpass(order: int, cutoff_hz: float, fs_hz: float) -> tuple[np.ndarr
         ValueError: ``order`` is not a non-negative integer or the cut-off is not in
             ``(0, fs_hz / 2)`` (scipy's conditions).
     """
+    wn = np.asarray(cutoff_hz, dtype=np.float64)
+    fs = float(fs_hz)
+    return _butter(order, wn / (fs / 2), "low", f" (fs={fs} -> fs/2={fs / 2})")
+
+
+def butter_highpass(order: int, wn: float) -> tuple[np.ndarray, np.ndarray]:
+    """``scipy.signal.butter(order, wn, "highpass")``: ``(b, a)``, ``wn`` the cut-off as
+    a fraction of the Nyquist frequency.
+
+    Raises:
+        ValueError: ``order`` is not a non-negative integer or ``wn`` is not in ``(0, 1)``.
+    """
+    return _butter(order, np.asarray(wn, dtype=np.float64), "high", "")
+
+
+def _butter(order: int, wn: np.ndarray, btype: str, fs_text: str
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """scipy's ``iirfilter`` for a Butterworth low- or high-pass, ``wn`` normalised."""
     if abs(int(order)) != order:
         raise ValueError("Filter order must be a nonnegative integer")
-    wn = np.asarray(cutoff_hz, dtype=np.float64)
     if np.ndim(wn) != 0:
-        raise ValueError("a low-pass filter has a single cut-off frequency")
-    fs = float(fs_hz)
-    wn = wn / (fs / 2)
+        raise ValueError("a low- or high-pass filter has a single cut-off frequency")
     if np.any(wn <= 0) or np.any(wn >= 1):
-        raise ValueError("Digital filter critical frequencies must "
-                         f"be 0 < Wn < fs/2 (fs={fs} -> fs/2={fs / 2})")
+        if fs_text:
+            raise ValueError(f"Digital filter critical frequencies must be 0 < Wn < fs/2"
+                             f"{fs_text}")
+        raise ValueError("Digital filter critical frequencies must be 0 < Wn < 1")
     # analog prototype (buttap)
     z = np.asarray([], dtype=np.float64)
     m = np.arange(-order + 1, order, 2, dtype=np.float64)
@@ -56,12 +73,19 @@ def butter_lowpass(order: int, cutoff_hz: float, fs_hz: float) -> tuple[np.ndarr
     # pre-warp (fs = 2 from here on, as scipy)
     fs = 2.0
     warped = 2 * fs * np.tan(np.pi * wn / fs)
-    # lp2lp_zpk
     wo = float(warped)
     degree = p.shape[0] - z.shape[0]
-    z = wo * z
-    p = wo * p
-    k = k * wo**degree
+    if btype == "low":  # lp2lp_zpk
+        z = wo * z
+        p = wo * p
+        k = k * wo**degree
+    else:  # lp2hp_zpk
+        z_hp = wo / z
+        p_hp = wo / p
+        z_hp = np.concatenate((z_hp, np.zeros(degree)))
+        k = k * np.real(np.prod(-z) / np.prod(-p))
+        z, p = z_hp, p_hp
+        degree = 0
     # bilinear_zpk
     fs2 = 2.0 * fs
     z_z = (fs2 + z) / (fs2 - z)

@@ -260,8 +260,10 @@ def run_log(
 ) -> int:
     """``grfguard run`` without the command line: read ``log``, run the monitor, write
     ``output``; returns the number of samples written. ``phase(name)`` (optional) is
-    called at the end of each step (``read``, ``checks``, ``monitor_setup``,
-    ``monitor_run``, ``write``: ``benchmarks/bench_run_cli.py`` times them)."""
+    called at the end of each step (``read``, ``checks``, ``monitor_setup``, then
+    ``run_write`` when the compiled monitor writes a Parquet output block by block,
+    otherwise ``monitor_run`` and ``write``: ``benchmarks/bench_run_cli.py`` times
+    them)."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.anyread import read_any
     from grfguard.io.logio import write_log
@@ -284,7 +286,10 @@ def run_log(
         check_log_plausible(df, rob, str(log))
     mark("checks")
     result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs,
-                           compiled=compiled, mark=mark)
+                           compiled=compiled, mark=mark, output=output)
+    if isinstance(result, int):  # written block by block (io/runwriter.py)
+        mark("run_write")
+        return result
     mark("monitor_run")
     del df
     write_log(result, output)
@@ -312,6 +317,7 @@ def _run_segments(df: Any, **kw: Any) -> Any:
         return _run_monitor(df, **kw)
     import pandas as pd
 
+    kw["output"] = None
     parts = []
     for k, part in df.groupby(SEGMENT, sort=False):
         seg = part.drop(columns=[SEGMENT]).reset_index(drop=True)
@@ -332,7 +338,11 @@ def _run_monitor(
     vfs: str | None = None,
     compiled: bool = True,
     mark: Any = None,
+    output: Path | None = None,
 ) -> Any:
+    """The monitor's output frame of ``df``; with ``output`` (a Parquet path) the compiled
+    monitor writes it there block by block and the number of rows is returned instead
+    (:func:`grfguard.io.runwriter.write_run`; the frame when it runs the Python stages)."""
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
     from grfguard.estimate.described import is_described, run_described
@@ -351,6 +361,12 @@ def _run_monitor(
     mon = Monitor.for_log(df, config=cfg)
     if mark is not None:
         mark("monitor_setup")
+    if output is not None and output.suffix.lower() != ".csv":
+        from grfguard.io.runwriter import write_run
+
+        n = write_run(mon, df, output)
+        if n is not None:
+            return n
     return mon.run(df)
 
 

@@ -5,9 +5,10 @@ sensor (VFS), identically per sample (``update``) and over a whole log (``run``)
 
 * :class:`InputGuard`: values outside the robot's physical range
   (:mod:`grfguard.io.plausibility`: IMU acceleration and rate, quaternion norm, joint
-  limits, sole forces, precomputed ``vfs_<s>``) become NaN before any estimator sees
-  them, so a finite absurd value (``imu_acc_z = 1e30``) is handled like a dropout
-  instead of poisoning filter states. A force sensor's implausible reading becomes a
+  limits, sole forces, precomputed ``vfs_<s>``, whose lower bound is wider: a virtual
+  corner force may be negative) become NaN before any estimator sees them, so a finite
+  absurd value (``imu_acc_z = 1e30``) is handled like a dropout instead of poisoning
+  filter states. A force sensor's implausible reading becomes a
   NaN reading for the detector (flagged at once) and the pipeline reports it with the
   kind ``spikes``.
 * :class:`TimeGuard`: classifies each sample's time stamp (``ok``, ``time_gap``,
@@ -98,8 +99,12 @@ class InputGuard:
         self.inputs = PlausibilityChecker(robot, ESTIMATOR_INPUTS)
         vfs_cols = tuple(f"vfs_{s}" for s in SENSOR_NAMES)
         self.forces = PlausibilityChecker(robot, (*FORCE_COLUMNS, *vfs_cols))
+        #: plausible range of a force reading (and of a recovered force) [N]
         self.force_lo = self.forces.ranges.force_lo
         self.force_hi = self.forces.ranges.force_hi
+        #: lowest plausible virtual corner force ``vfs_<s>`` [N] (wider than a reading's:
+        #: :attr:`~grfguard.io.plausibility.PlausibleRanges.virtual_min_weights`)
+        self.vfs_force_lo = self.forces.ranges.vfs_force_lo
 
     def clean_row(self, row: Mapping[str, Any]) -> tuple[Mapping[str, Any], str]:
         """``row`` with implausible estimator inputs and forces set to NaN (the same

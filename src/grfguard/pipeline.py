@@ -103,9 +103,9 @@ def _f(row: Mapping[str, Any], key: str) -> float:
         return _NAN
 
 
-def _robot_by_mass(log: pd.DataFrame) -> RobotConfig:
-    """A stand-in robot with the log's mass (``attrs["robot"]["mass"]`` or
-    ``["nominal"]["mass"]``) for the physical ranges; SURALP's when none is found."""
+def _robot_by_mass(log: pd.DataFrame) -> RobotConfig | None:
+    """A robot with the log's mass (``attrs["robot"]["mass"]`` or ``["nominal"]["mass"]``)
+    for the physical ranges, or None when none is found."""
     r = (getattr(log, "attrs", {}) or {}).get("robot")
     for d in (r, r.get("nominal") if isinstance(r, Mapping) else None):
         if isinstance(d, Mapping):
@@ -115,7 +115,46 @@ def _robot_by_mass(log: pd.DataFrame) -> RobotConfig:
                 continue
             if math.isfinite(m) and m > 0:
                 return RobotConfig(mass=m)
-    return RobotConfig()
+    return None
+
+
+def _log_robot(log: pd.DataFrame, vfs: Any, robot: Any) -> RobotConfig:
+    """The robot whose weight and sole the monitor's guards, common-mode fit, swing-zero
+    learner and standing layer use: ``robot`` (a ``RobotConfig``, or a described robot:
+    ``LoadedRobot``, shipped name, TOML path); a described robot named by the log (its own
+    mass and sole, :func:`grfguard.estimate.described.monitor_robot`); the log's
+    ``RobotConfig`` (``attrs["robot"]``); the virtual sensor's robot. Never a stand-in.
+
+    Raises:
+        LogFormatError: The log gives no way to know the robot.
+    """
+    from grfguard.calib.selfcal import robot_of
+    from grfguard.estimate.described import is_described, monitor_robot
+
+    if isinstance(robot, RobotConfig):
+        return robot
+    attrs = getattr(log, "attrs", {}) or {}
+    if robot is not None or is_described(log) or isinstance(attrs.get("robot_name"), str):
+        return monitor_robot(log, robot)
+    named = attrs.get("robot")
+    if isinstance(named, str) and not named.lstrip().startswith("{"):  # a robot's name
+        return monitor_robot(log, named)
+    if named is not None:
+        try:
+            return robot_of(log)
+        except Exception:  # noqa: BLE001 - not SURALP-shaped parameters: a mass at least
+            found = _robot_by_mass(log)
+            if found is not None:
+                return found
+    if getattr(vfs, "robot", None) is not None:
+        return vfs.robot
+    raise LogFormatError(
+        "Monitor.for_log: the log names no robot (log.attrs['robot'] and "
+        "attrs['robot_name'] are missing or not understood: "
+        f"{attrs.get('robot')!r:.80}); the monitor's guards, common-mode fit, swing zeros "
+        "and standing layer need the robot's weight and sole. Set log.attrs['robot'] = "
+        "RobotConfig(...).to_dict() (or attrs['robot_name'] = 'g1', 'talos' or a robot "
+        "TOML), pass Monitor.for_log(log, robot=...), or use the CLI's --robot")
 
 
 def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
@@ -254,7 +293,7 @@ class Monitor:
         self.standing: StandingStage | None = None
         if standing is not False:
             self.standing = StandingStage(self.config.dt_s, standing if isinstance(
-                standing, StandingConfig) else None)
+                standing, StandingConfig) else None, weight_n=robot.weight)
         self.common: CommonModeMonitor | None = None
         self.zeros: SwingZeroLearner | None = None
         self.gyro_bias: GyroBiasLearner | None = None
@@ -280,17 +319,19 @@ class Monitor:
                 guard: GuardConfig | None = None,
                 common_mode: CommonModeConfig | bool = True,
                 compiled: bool | None = None,
-                standing: StandingConfig | bool = True) -> Monitor:
+                standing: StandingConfig | bool = True, robot: Any = None) -> Monitor:
         """A monitor for ``log``: reuses its ``vfs_*`` columns when present, otherwise builds
         ``VirtualForceSensor.for_log(log, config.vfs)``; the sampling period from ``time``;
-        the robot (physical ranges) from ``log.attrs``.
+        the robot (weight and sole of the guards, the system layer and the standing layer)
+        from ``robot`` (a ``RobotConfig``, or a described robot: ``LoadedRobot``, shipped
+        name, TOML path) or ``log.attrs`` (a described robot such as G1: its own mass and
+        sole), never a stand-in: a log that names no robot (with precomputed ``vfs_*``
+        columns and no ``robot``) raises :class:`~grfguard.errors.LogFormatError`.
 
         The virtual sensor is the compiled one (:mod:`grfguard.kernels`; every
         ``config.vfs``); its machine code is loaded from the on-disk cache here (1-2 s once
         per process; about 35 s once per fresh install). ``compiled=False`` runs the
         detector's pure-Python stages around it."""
-        from grfguard.calib.selfcal import robot_of
-
         cfg = config_for_log(log, config)
         has_vfs = all(vfs_col(s) in log.columns for s in SENSOR_NAMES) and all(
             c in log.columns for c in VFS_TOTAL_COLUMNS
@@ -300,10 +341,7 @@ class Monitor:
             from grfguard.estimate.vfs import VirtualForceSensor
 
             vfs = _compiled_or(VirtualForceSensor.for_log(log, cfg.vfs))
-        try:
-            robot = robot_of(log)
-        except Exception:  # noqa: BLE001 - a robot described another way (URDF/MJCF)
-            robot = getattr(vfs, "robot", None) or _robot_by_mass(log)
+        robot = _log_robot(log, vfs, robot)
         return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
                    standing=standing, compiled=compiled)
 
@@ -342,7 +380,8 @@ class Monitor:
                 from grfguard.kernels.monitor import MonitorKernel
 
                 prm = detect_params(self.config, self.detector.tuning, self.recovery.tuning,
-                                    self.guard, (self.inputs.force_lo, self.inputs.force_hi))
+                                    self.guard, (self.inputs.force_lo, self.inputs.force_hi),
+                                    self.inputs.vfs_force_lo)
                 vk = self.vfs.kernel(has_gyro, has_ref) if self.vfs is not None else None
                 system = None
                 if self.common is not None:  # the system layer (kernels/system.py)
@@ -455,8 +494,8 @@ class Monitor:
         tot: list[float], cref: list[float], cest: list[float],
     ) -> _Prepared:
         """The guards' verdict on one sample (shared by ``update`` and ``run``)."""
-        lo, hi = self.inputs.force_lo, self.inputs.force_hi
-        bounded = all(math.isnan(q) or lo <= q <= hi for q in v) and all(
+        lo, hi, vlo = self.inputs.force_lo, self.inputs.force_hi, self.inputs.vfs_force_lo
+        bounded = all(math.isnan(q) or vlo <= q <= hi for q in v) and all(
             math.isnan(q) or 2 * lo <= q <= 2 * hi for q in tot)
         use = self.continuity.after(clock, reset, valid) and bounded
         if not use:
@@ -786,6 +825,19 @@ class Monitor:
         Raises:
             LogFormatError: If ``time`` or a ``force_<s>`` column is missing.
         """
+        k = self._batch_kernel(log)
+        if k is not None:
+            from grfguard.kernels.monitor import run_frame
+
+            out = run_frame(self, k, log)
+            out.attrs = {**log.attrs, "monitor": self.describe()}
+            return out
+        return self._run_python(log)
+
+    def _batch_kernel(self, log: pd.DataFrame) -> Any:
+        """The start of :meth:`run` (also of :func:`grfguard.io.runwriter.write_run`): the
+        columns checked, the monitor reset; the compiled kernel for ``log``, or None when
+        the monitor runs the Python stages."""
         missing = [c for c in (TIME, *(force_col(s) for s in SENSOR_NAMES)) if c not in log]
         if missing:
             raise LogFormatError(
@@ -794,14 +846,7 @@ class Monitor:
         self.reset()
         if self.vfs is not None:
             self.vfs.check_columns(log.columns)
-        k = self._kernel(*_has_gyro_ref(log))
-        if k is not None:
-            from grfguard.kernels.monitor import run_frame
-
-            out = run_frame(self, k, log)
-            out.attrs = {**log.attrs, "monitor": self.describe()}
-            return out
-        return self._run_python(log)
+        return self._kernel(*_has_gyro_ref(log))
 
     def _run_python(self, log: pd.DataFrame) -> pd.DataFrame:
         """``run`` through the Python stages (the monitor is reset)."""
@@ -894,9 +939,9 @@ class Monitor:
             gap = np.array([s == "time_gap" for s in tstate], dtype=bool)
             resets = np.zeros(n, dtype=bool)
             resets[1:] = gap[1:] | ~valid[:-1]
-        lo, hi = self.inputs.force_lo, self.inputs.force_hi
+        lo, hi, vlo = self.inputs.force_lo, self.inputs.force_hi, self.inputs.vfs_force_lo
         with np.errstate(invalid="ignore"):
-            bounded = (np.isnan(v) | ((v >= lo) & (v <= hi))).all(axis=1) & (
+            bounded = (np.isnan(v) | ((v >= vlo) & (v <= hi))).all(axis=1) & (
                 np.isnan(tot) | ((tot >= 2 * lo) & (tot <= 2 * hi))).all(axis=1)
             implausible = ~np.isnan(x_raw) & ~((x_raw >= lo) & (x_raw <= hi))
         # the clock of the last reset at or before each sample (Continuity.after)

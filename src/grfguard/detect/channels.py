@@ -55,7 +55,6 @@ __all__ = [
     "channel_valid_mask",
 ]
 
-_KINDS = ("offset", "drift", "gain")
 
 
 @dataclass(frozen=True)
@@ -139,7 +138,8 @@ class ContactPhases:
     last contact change and ``guard_s`` before the expected next one; the expected end of
     a phase is its start plus the last duration of the same phase (the same feet on the
     ground), else of its mirror (the other foot's single support). Before such a phase
-    has been seen whole, no test is valid (the first step of a walk).
+    has been seen whole, no test is valid (the first step of a walk). Compiled
+    (:func:`grfguard.kernels.channels.gate_step`).
 
     Args:
         guard_s: Distance kept from contact changes [s].
@@ -151,26 +151,25 @@ class ContactPhases:
 
     def reset(self) -> None:
         """No contact history."""
-        self._prev: tuple[bool, bool] | None = None
-        self._start = math.nan  # start time of the current phase (NaN: before the log)
-        self._last: dict[tuple[bool, bool], float] = {}
+        from grfguard.kernels.channels import new_state
+
+        self._gate = new_state(0, 1)[3]
 
     def step(self, t: float, right: bool, left: bool) -> bool:
         """Advance to time ``t`` [s] with the planned contact of both feet; returns
         whether the tests are valid at ``t``."""
-        state = (bool(right), bool(left))
-        if self._prev is None:
-            self._prev = state
-        elif state != self._prev:
-            if math.isfinite(self._start):
-                self._last[self._prev] = t - self._start
-            self._start = t
-            self._prev = state
-        if state == (True, True) or not math.isfinite(self._start):
-            return False
-        exp = self._last.get(state, self._last.get(state[::-1], math.nan))
-        since = t - self._start
-        return math.isfinite(exp) and self.guard_s <= since <= exp - self.guard_s
+        from grfguard.kernels.channels import gate_step
+
+        return bool(gate_step(self._gate, float(t), bool(right), bool(left), self.guard_s))
+
+    def run(self, t: np.ndarray, right: np.ndarray, left: np.ndarray) -> np.ndarray:
+        """:meth:`step` over arrays (n,): (n,) bool."""
+        from grfguard.kernels.channels import gate_run
+
+        ok = np.zeros(len(t), bool)
+        gate_run(self._gate, np.ascontiguousarray(t, float), np.ascontiguousarray(right, bool),
+                 np.ascontiguousarray(left, bool), self.guard_s, ok)
+        return ok
 
 
 def _contact_columns(log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -191,9 +190,7 @@ def channel_valid_mask(log: pd.DataFrame, guard_s: float) -> np.ndarray:
     last planned contact change and before the expected next one)."""
     t = log["time"].to_numpy(float)
     cr, cl = _contact_columns(log)
-    gate = ContactPhases(guard_s)
-    ok = np.fromiter((gate.step(float(t[k]), bool(cr[k]), bool(cl[k])) for k in range(t.size)),
-                     bool, t.size)
+    ok = ContactPhases(guard_s).run(t, cr, cl)
     return np.column_stack([ok, ok])
 
 
@@ -257,45 +254,35 @@ def calibrate_channels(logs: list[pd.DataFrame], rate_per_hour: float = 0.1,
                    source=f"calibrated on {len(logs)} fault-free log(s), {hours * 60:.1f} min")
 
 
-class _Channel:
-    """Streaming state of one channel (tests, fits, flag)."""
+#: Longest fault-free CUSUM excursion kept as onset evidence [samples] (a memory bound:
+#: 200 s at 1 kHz, 2000 s at 100 Hz; half is dropped when it is reached).
+_MAX_EXCURSION = 200_000
 
-    def __init__(self) -> None:
-        self.reset()
+_OUT_NAMES = ("flag", "kind", "fault_est", "recovered", "onset_est")
 
-    def reset(self) -> None:
-        self.gp = self.gn = 0.0
-        self.last_x = math.nan
-        self.run = 0          # identical readings so far (1 = a new value)
-        self.excursion: list[tuple[float, float, float]] = []  # (t, r, v) since the sum left 0
-        self.clear_flag()
 
-    def clear_flag(self) -> None:
-        self.flag = False
-        self.frozen = False
-        self.onset_s = math.nan
-        self.last_alarm_s = math.nan
-        self.kind = "none"  # the kind given at the previous sample
-        self.quiet = 0
-        self.sums = [0.0] * 6  # Σr, Σ1, Στr, Σττ, Σvr, Σvv on valid samples since the onset
-        self.srr = 0.0
+def _kinds(codes: np.ndarray, names: tuple[str, ...]) -> Any:
+    """The kind column of ``codes`` (indices into ``names``) in the dtype pandas gives a
+    column of those strings (its Arrow string dtype: built from the codes by Arrow, not
+    string by string from Python objects)."""
+    obj = np.array(names, dtype=object)
+    dtype = pd.Series(obj).dtype
+    if getattr(dtype, "storage", None) == "pyarrow":
+        import pyarrow as pa
 
-    def add(self, t: float, r: float, v: float) -> None:
-        tau = t - self.onset_s
-        s = self.sums
-        s[0] += r
-        s[1] += 1.0
-        s[2] += tau * r
-        s[3] += tau * tau
-        s[4] += v * r
-        s[5] += v * v
-        self.srr += r * r
+        arr = pa.DictionaryArray.from_arrays(pa.array(codes),
+                                             pa.array(list(names), pa.large_string()))
+        out = pd.array(arr.dictionary_decode(), dtype=dtype)
+        if out.dtype == dtype:
+            return out
+    return obj[codes]
 
 
 class ChannelMonitor:
     """Per-channel detection, kind, recovery and flag clearing (module docstring), batch
-    (:meth:`run`) or one sample at a time (:meth:`update`); :meth:`run` is :meth:`update`
-    over the rows, so both give the same outputs.
+    (:meth:`run`) or one sample at a time (:meth:`update`). Both run the same compiled
+    step (:func:`grfguard.kernels.channels.channels_sample`; :meth:`run` loops it over
+    the log in compiled code), so both give the same outputs.
 
     Args:
         config: Scales and thresholds (:func:`calibrate_channels`).
@@ -321,8 +308,35 @@ class ChannelMonitor:
         """Forget everything (flags, sums, contact history, channel list)."""
         self.dt_s = self._dt_given
         self._t_prev = math.nan
-        self.gate = ContactPhases(self.config.guard_s)
-        self._state: dict[str, _Channel] = {}
+        self._k: dict[str, Any] | None = None  # compiled state, made for the channels
+
+    def _kernel_state(self, chans: list[str], cap: int) -> dict[str, Any]:
+        """Settings, state and one-sample buffers of the compiled step for ``chans``."""
+        from grfguard.kernels.channels import N_PRM, new_state
+
+        cfg = self.config
+        fst, ist, exc, gate = new_state(len(chans), cap)
+        prm = np.zeros(N_PRM)
+        prm[:5] = (cfg.kappa, cfg.h, cfg.clear_s, cfg.clear_valid_fraction, cfg.guard_s)
+        prm[8] = _MAX_EXCURSION
+        ks = {"side": np.array([_side(c) for c in chans], np.int64),
+              "sigma": np.array([cfg.sigma[c] for c in chans], float).reshape(-1, 2),
+              "prm": prm, "fst": fst, "ist": ist, "exc": exc, "gate": gate}
+        self._set_rate(ks)
+        return ks
+
+    def _set_rate(self, ks: dict[str, Any]) -> None:
+        """The constant-reading and clearing lengths in samples for the current rate
+        (none before the rate is known: no frozen test and no clearing)."""
+        prm = ks["prm"]
+        if self.dt_s:
+            prm[5] = max(3, int(round(self.config.const_s / self.dt_s)))
+            prm[6] = int(round(self.config.clear_s / self.dt_s))
+            prm[7] = self.dt_s
+        else:
+            prm[5] = prm[6] = math.inf
+            prm[7] = 0.0
+        ks["dt"] = self.dt_s
 
     # ------------------------------------------------------------------ batch
     def run(self, log: pd.DataFrame) -> pd.DataFrame:
@@ -333,30 +347,37 @@ class ChannelMonitor:
             LogFormatError: No F/T channel with its virtual channel, no contact column,
                 or a channel without a calibrated scale.
         """
+        from grfguard.kernels.channels import KIND_NAMES, channels_run
+
         chans = _channels(log)
         self._check(chans)
-        t = log["time"].to_numpy(float)
+        t = np.ascontiguousarray(log["time"].to_numpy(float))
         cr, cl = _contact_columns(log)
         self.reset()
         self.channels = chans
         if self.dt_s is None and t.size > 1:
             self.dt_s = float(np.median(np.diff(t)))
-        xs = [log[c].to_numpy(float).tolist() for c in chans]
-        vs = [log[f"vfs_{c[3:]}"].to_numpy(float).tolist() for c in chans]
-        n = t.size
-        cols = {c: (np.zeros(n, bool), np.full(n, "none", dtype=object), np.zeros(n),
-                    np.zeros(n), np.full(n, np.nan)) for c in chans}
-        tl, crl, cll = t.tolist(), cr.tolist(), cl.tolist()
-        for k in range(n):
-            step = self._step(tl[k], crl[k], cll[k], [x[k] for x in xs], [v[k] for v in vs])
-            for c, o in zip(chans, step, strict=True):
-                a = cols[c]
-                a[0][k], a[1][k], a[2][k], a[3][k], a[4][k] = o
-        out = log.copy()
-        for c in chans:
-            for name, arr in zip(("flag", "kind", "fault_est", "recovered", "onset_est"),
-                                 cols[c], strict=True):
-                out[f"{name}_{c}"] = arr
+        n, m = t.size, len(chans)
+        # one frame access per block (each access deep-copies the log's attrs)
+        X = np.ascontiguousarray(log[chans].to_numpy(float)).reshape(n, m)
+        V = np.ascontiguousarray(log[[f"vfs_{c[3:]}" for c in chans]].to_numpy(float)
+                                 ).reshape(n, m)
+        ks = self._k = self._kernel_state(chans, min(n, _MAX_EXCURSION + 1))
+        outs = (np.zeros((n, m), bool), np.zeros((n, m), np.int8), np.zeros((n, m)),
+                np.zeros((n, m)), np.zeros((n, m)))
+        channels_run(t, np.ascontiguousarray(cr), np.ascontiguousarray(cl), X, V, ks["side"],
+                     ks["sigma"], ks["prm"], ks["fst"], ks["ist"], ks["exc"], ks["gate"],
+                     *outs)
+        if n:
+            self._t_prev = float(t[-1])
+        cols = {f"{name}_{c}": (_kinds(a[:, j], KIND_NAMES) if name == "kind" else a[:, j])
+                for j, c in enumerate(chans) for name, a in zip(_OUT_NAMES, outs, strict=True)}
+        if any(k in log.columns for k in cols):
+            out = log.copy()
+            for k, a in cols.items():
+                out[k] = a
+        else:
+            out = pd.concat([log, pd.DataFrame(cols, index=log.index)], axis=1)
         out.attrs = {**log.attrs, "channel_monitor": {"h": self.config.h,
                                                       "kappa": self.config.kappa,
                                                       "source": self.config.source}}
@@ -411,107 +432,32 @@ class ChannelMonitor:
             out[f"recovered_{c}"], out[f"onset_est_{c}"] = rc, on
         return out
 
-    # ------------------------------------------------------------------- core
     def _step(self, t: float, cr: bool, cl: bool, xs: list[float],
               vs: list[float]) -> list[tuple[bool, str, float, float, float]]:
-        self._t_prev = t
-        ok = self.gate.step(t, cr, cl)
-        if self.dt_s:
-            n_const: float = max(3, int(round(self.config.const_s / self.dt_s)))
-            n_clear: float = int(round(self.config.clear_s / self.dt_s))
-        else:  # the first sample: no rate yet, so no frozen test and no clearing
-            n_const = n_clear = math.inf
-        out = []
+        """One sample through the compiled step (state kept in ``self._k``)."""
+        from grfguard.kernels.channels import KIND_NAMES, channels_sample
+
         assert self.channels is not None
-        for c, x, v in zip(self.channels, xs, vs, strict=True):
-            st = self._state.get(c)
-            if st is None:
-                st = self._state[c] = _Channel()
-            loaded = cr if _side(c) == 0 else cl
-            out.append(self._channel_step(st, c, t, x, v, ok, loaded, n_const, n_clear))
-        return out
-
-    def _channel_step(self, st: _Channel, c: str, t: float, x: float, v: float, ok: bool,
-                      loaded: bool, n_const: float, n_clear: float,
-                      ) -> tuple[bool, str, float, float, float]:
-        cfg = self.config
-        if math.isfinite(x) and x == st.last_x:
-            st.run += 1
-        else:
-            st.run = 1 if math.isfinite(x) else 0
-        st.last_x = x
-        r = x - v
-        valid = ok and math.isfinite(r)
-        sig = cfg.sigma[c][0 if loaded else 1]
-        const = st.run >= n_const
-        if not st.flag:
-            if (loaded or ok) and const:
-                st.flag, st.frozen, st.last_alarm_s = True, True, t
-                st.onset_s = t - (st.run - 1) * (self.dt_s or 0.0)
-                st.gp = st.gn = 0.0
-                st.excursion.clear()
-            elif valid:
-                if st.gp == 0.0 and st.gn == 0.0:
-                    st.excursion.clear()
-                st.excursion.append((t, r, v))
-                st.gp, st.gn = cusum_step(st.gp, st.gn, r / sig, cfg.kappa)
-                if max(st.gp, st.gn) > cfg.h:
-                    st.flag, st.last_alarm_s = True, t
-                    st.onset_s = st.excursion[0][0]
-                    for tj, rj, vj in st.excursion:  # the evidence so far
-                        st.add(tj, rj, vj)
-                    st.excursion.clear()
-                    st.gp = st.gn = 0.0
-                elif len(st.excursion) > _MAX_EXCURSION:
-                    del st.excursion[: len(st.excursion) // 2]
-            if not st.flag:
-                return False, "none", 0.0, x, math.nan
-        else:
-            if const:
-                if not st.frozen:  # flagged by the CUSUM first (a jump to the frozen value)
-                    st.frozen = True
-                if loaded or ok:
-                    st.last_alarm_s = t
-            elif st.frozen and (loaded or ok) and st.run == 1:
-                st.quiet += 1  # the reading varies again
-            if valid:
-                if not st.frozen:
-                    st.add(t, r, v)
-                st.gp, st.gn = cusum_step(st.gp, st.gn, r / sig, cfg.kappa)
-                if max(st.gp, st.gn) > cfg.h:
-                    if not st.frozen:
-                        st.last_alarm_s, st.quiet = t, 0
-                    st.gp = st.gn = 0.0
-                elif (not st.frozen and abs(r / sig) < cfg.kappa
-                      and (loaded or st.kind != "gain")):
-                    st.quiet += 1  # a gain fault only shows under load: quiet in stance
-            if (t - st.last_alarm_s >= cfg.clear_s
-                    and st.quiet >= n_clear * cfg.clear_valid_fraction):
-                st.clear_flag()
-                st.gp = st.gn = 0.0
-                st.excursion.clear()
-                return False, "none", 0.0, x, math.nan
-        if st.frozen:
-            return True, "frozen", r, v, st.onset_s
-        kind, (b, a, g) = _best_fit(st.sums, st.srr)
-        st.kind = kind
-        fault = {"offset": b, "drift": a * (t - st.onset_s),
-                 "gain": (g - 1.0) / g * x if g != 0 else 0.0}[kind]
-        return True, kind, fault, x - fault, st.onset_s
-
-
-#: Longest fault-free CUSUM excursion kept as onset evidence [samples] (a memory bound:
-#: 200 s at 1 kHz, 2000 s at 100 Hz; half is dropped when it is reached).
-_MAX_EXCURSION = 200_000
-
-
-def _best_fit(s: list[float], srr: float) -> tuple[str, tuple[float, float, float]]:
-    """Kind with the least squared error among offset, drift and gain fits, and the fitted
-    ``(b, a, g)``."""
-    sr, n, str_, stt, svr, svv = s
-    b = sr / n if n > 0 else 0.0
-    a = str_ / stt if stt > 0 else 0.0
-    g1 = svr / svv if svv > 0 else 0.0
-    sse = {"offset": srr - b * sr, "drift": srr - a * str_, "gain": srr - g1 * svr}
-    k = min(_KINDS, key=lambda q: sse[q])
-    return k, (b, a, 1.0 + g1)
+        self._t_prev = t
+        ks = self._k
+        m = len(self.channels)
+        if ks is None:
+            ks = self._k = self._kernel_state(self.channels, 64)
+            ks["buf"] = (np.zeros((1, m)), np.zeros((1, m)), np.zeros((1, m), bool),
+                         np.zeros((1, m), np.int8), np.zeros((1, m)), np.zeros((1, m)),
+                         np.zeros((1, m)))
+        if ks["dt"] != self.dt_s:  # the rate became known (second sample)
+            self._set_rate(ks)
+        X, V, fl, kd, fe, rc, on = ks["buf"]
+        X[0] = xs
+        V[0] = vs
+        longest = channels_sample(0, t, cr, cl, X, V, ks["side"], ks["sigma"], ks["prm"],
+                                  ks["fst"], ks["ist"], ks["exc"], ks["gate"],
+                                  fl, kd, fe, rc, on)
+        cap = ks["exc"].shape[1]
+        if longest + 1 > cap and cap < _MAX_EXCURSION + 1:  # room for the next sample
+            exc = np.zeros((m, min(2 * cap, _MAX_EXCURSION + 1), 3))
+            exc[:, :cap] = ks["exc"]
+            ks["exc"] = exc
+        return [(bool(fl[0, j]), KIND_NAMES[kd[0, j]], float(fe[0, j]), float(rc[0, j]),
+                 float(on[0, j])) for j in range(m)]

@@ -3,18 +3,19 @@
 While walking, each foot is unloaded once per step and the per-sensor tests re-learn
 their zero; standing, no foot is ever unloaded and the internal force between the feet
 is not observable, so those tests wait for walking to resume. Standing is quasi-static,
-though: the residual ``d_i = f_i - v_i`` of a healthy sensor stays where it was when
-the stand began (the virtual sensor's split of the load between the feet may be off,
-but it stays off by the same amount while nothing moves). :class:`StandingDetector`
-learns each residual's baseline over ``baseline_s`` after ``settle_s`` of double
-support, then flags a sensor whose low-passed residual leaves the baseline by more than
-``threshold_n`` for ``persist_s`` while the other sensors' deviations stay small
-(``isolation_ratio``): a common shift of all residuals is a model or posture change, not
-a sensor fault. A stand ends when a foot lifts or when the virtual force of a foot moves
-by more than ``max_shift_fraction`` of the weight from its value at the baseline (the
-robot shifts its weight: the split error changes). Kinds are ``offset`` (the deviation
-appeared within ``drift_rise_s``) or ``drift``; a gain fault is an offset while the
-load stands still (``(g - 1)·load`` is constant) and is reported as one.
+though: the residual ``d_i = f_i - v_i`` of a healthy sensor stays where it was when the
+stand began (the virtual sensor's split of the load between the feet may be off, but it
+stays off by the same amount while nothing moves). :class:`StandingDetector` learns each
+residual's baseline over ``baseline_s`` after ``settle_s`` of double support, then flags
+a sensor whose low-passed residual leaves the baseline by more than
+``threshold_fraction`` of the robot's weight (15 N on SURALP) for ``persist_s`` while
+the other sensors' deviations stay small (``isolation_ratio``): a common shift of all
+residuals is a model or posture change, not a sensor fault. A stand ends when a foot
+lifts or when the virtual force of a foot moves by more than ``max_shift_fraction`` of
+the weight from its value at the baseline (the robot shifts its weight: the split error
+changes). Kinds are ``offset`` (the deviation appeared within ``drift_rise_s``) or
+``drift``; a gain fault is an offset while the load stands still (``(g - 1)·load`` is
+constant) and is reported as one.
 
 :class:`StandingStage` is the layer of the default :class:`~grfguard.detect.Monitor`:
 it runs after the per-sensor detector and recovery, flags what the detector has not
@@ -58,7 +59,9 @@ class StandingConfig:
         settle_s: Double support needed before a stand counts as standing [s].
         baseline_s: Averaging window of the residual baselines [s].
         filter_s: Time constant of the residual low-pass [s].
-        threshold_n: Deviation from the baseline that flags a sensor [N].
+        threshold_fraction: Deviation from the baseline that flags a sensor, as a fraction
+            of the robot's weight (0.0134182...: 15 N on SURALP's 114 kg, 4.4 N on G1's
+            33.3 kg) [-].
         persist_s: Time the deviation must persist [s].
         isolation_ratio: The flagged deviation must exceed this multiple of the median
             deviation of the other sensors.
@@ -76,7 +79,7 @@ class StandingConfig:
     settle_s: float = 0.6
     baseline_s: float = 0.3
     filter_s: float = 0.02
-    threshold_n: float = 15.0
+    threshold_fraction: float = 0.013418207971488991  # x 1117.884 N = 15.0 N exactly
     persist_s: float = 0.04
     isolation_ratio: float = 3.0
     drift_rise_s: float = 0.2
@@ -89,7 +92,7 @@ class StandingConfig:
         check_number(o, "settle_s", self.settle_s, 0.0, 60.0, "s")
         check_number(o, "baseline_s", self.baseline_s, 0.001, 60.0, "s")
         check_number(o, "filter_s", self.filter_s, 0.0, 10.0, "s")
-        check_number(o, "threshold_n", self.threshold_n, 0.0, 1e5, "N")
+        check_number(o, "threshold_fraction", self.threshold_fraction, 0.0, 10.0, "")
         check_number(o, "persist_s", self.persist_s, 0.0, 10.0, "s")
         check_number(o, "isolation_ratio", self.isolation_ratio, 1.0, 100.0, "")
         check_number(o, "drift_rise_s", self.drift_rise_s, 0.0, 60.0, "s")
@@ -128,14 +131,20 @@ class StandingDetector:
         dt_s: Sampling period of the log [s] (required: real robots log at 100 Hz to 1 kHz;
             the monitor passes its ``config.dt_s``, the log's rate).
         config: Settings.
+        weight_n: The robot's weight m g [N] (required: the threshold is a fraction of it).
 
     Raises:
-        ConfigError: If ``dt_s`` is not a positive number of seconds.
+        ConfigError: If ``dt_s`` is not a positive number of seconds or ``weight_n`` not a
+            positive weight.
     """
 
-    def __init__(self, dt_s: float, config: StandingConfig | None = None) -> None:
+    def __init__(self, dt_s: float, config: StandingConfig | None = None, *,
+                 weight_n: float) -> None:
         self.dt_s = check_period("standing", dt_s)
         self.config = config if config is not None else StandingConfig()
+        check_number("standing", "weight_n", weight_n, 1e-3, 1e7, "N")
+        #: ``threshold_fraction`` of this robot's weight [N]
+        self.threshold_n = self.config.threshold_fraction * float(weight_n)
         self._a = (1.0 if self.config.filter_s <= 0
                    else 1.0 - math.exp(-self.dt_s / self.config.filter_s))
         self.ended: StandEnd | None = None
@@ -279,7 +288,7 @@ class StandingDetector:
     def _monitor(self, lp: list[float]) -> None:
         """Deviations from the baselines, flags, kinds, clearing (one sample)."""
         c = self.config
-        dt, t, thr = self.dt_s, self._t, c.threshold_n
+        dt, t, thr = self.dt_s, self._t, self.threshold_n
         base = self._base
         assert base is not None
         dev_s = [q - b if q == q else 0.0 for q, b in zip(lp, base, strict=True)]
@@ -345,7 +354,7 @@ class StandingStage:
     (``recovered = reading − eta``) and a gain ``g = level / (level − eta)`` (``level``
     the reading at the end of the stand; ``recovered = reading / g``); the one closer to
     the virtual sensor (plus the stand's baseline residual) over ``hold_filter_s`` wins
-    once it is ``threshold_n`` closer (in swing a gain reads zero, an offset ``eta``),
+    once it is the detector's threshold closer (in swing a gain reads zero, an offset ``eta``),
     and the kind becomes ``gain``.
 
     Args:
@@ -353,13 +362,16 @@ class StandingStage:
             :class:`~grfguard.detect.Monitor` passes its ``config.dt_s`` (the log's rate,
             from ``Monitor.for_log``).
         config: Settings of the standing detector.
+        weight_n: The robot's weight m g [N] (the monitor passes its robot's).
 
     Raises:
-        ConfigError: If ``dt_s`` is not a positive number of seconds.
+        ConfigError: If ``dt_s`` is not a positive number of seconds or ``weight_n`` not a
+            positive weight.
     """
 
-    def __init__(self, dt_s: float, config: StandingConfig | None = None) -> None:
-        self.detector = StandingDetector(dt_s, config)
+    def __init__(self, dt_s: float, config: StandingConfig | None = None, *,
+                 weight_n: float) -> None:
+        self.detector = StandingDetector(dt_s, config, weight_n=weight_n)
         tau = self.detector.config.hold_filter_s
         self._a_hold = 1.0 if tau <= 0 else 1.0 - math.exp(-self.detector.dt_s / tau)
         self.reset()
@@ -403,7 +415,7 @@ class StandingStage:
             a = self._a_hold
             self._e_off[i] += a * (abs(xi - eta - ref) - self._e_off[i])
             self._e_gain[i] += a * (abs(xi / g - ref) - self._e_gain[i])
-            if self._e_off[i] - self._e_gain[i] > self.detector.config.threshold_n:
+            if self._e_off[i] - self._e_gain[i] > self.detector.threshold_n:
                 self.held_kind[i] = "gain"
                 return "gain", xi - xi / g
         return self.held_kind[i], eta
@@ -459,7 +471,7 @@ class StandingStage:
 
     def _hold(self, end: StandEnd) -> None:
         """Hold the flags of a stand that ended."""
-        thr = self.detector.config.threshold_n
+        thr = self.detector.threshold_n
         for i in range(_N):
             if not end.flags[i]:
                 continue

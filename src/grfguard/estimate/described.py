@@ -35,6 +35,7 @@ __all__ = [
     "described_thresholds",
     "ft_channel_calibration",
     "is_described",
+    "monitor_robot",
     "run_described",
     "with_described_vfs",
 ]
@@ -62,6 +63,52 @@ def described_robot(df: pd.DataFrame, robot: Any = None) -> Any:
             "the log's metadata names no described robot (attrs['robot_name']); pass "
             "robot='g1', 'talos' or a robot TOML")
     return load_model(load_description(name))
+
+
+def monitor_robot(df: pd.DataFrame, robot: Any = None) -> Any:
+    """The :class:`~grfguard.model.robot.RobotConfig` whose weight and corner layout the
+    corner-cell monitor's input guards, common-mode fit, swing-zero learner and standing
+    layer use for a described robot: the robot's own total mass (the loaded model's; a
+    simulated log's ``attrs["mass"]`` saves loading it) and its sole rectangle and corner
+    cells. Only the weight and the corner layout of the result are meant (the leg
+    fields keep their defaults and are not used by those stages).
+
+    Args:
+        df: A log of a described corner-cell robot.
+        robot: As in :func:`described_robot`.
+
+    Raises:
+        LogFormatError: No robot is named, or the two soles differ (the monitor takes one
+            corner layout for both feet).
+    """
+    import math
+
+    from grfguard.model.description import load_description
+    from grfguard.model.loader import LoadedRobot
+    from grfguard.model.robot import RobotConfig
+
+    if isinstance(robot, LoadedRobot):
+        desc, mass = robot.description, robot.mass
+    else:
+        try:
+            m = float(df.attrs.get("mass"))  # written by the whole-body simulation
+        except (TypeError, ValueError):
+            m = math.nan
+        name = robot if robot is not None else df.attrs.get("robot_name")
+        if robot is None and name is not None and math.isfinite(m) and m > 0:
+            desc, mass = load_description(name), m
+        else:
+            rob = described_robot(df, robot)
+            desc, mass = rob.description, rob.mass
+    fr, fl = desc.feet
+    shape = [(f.length, f.width, f.corner_inset) for f in (fr, fl)]
+    if shape[0] != shape[1]:
+        raise LogFormatError(
+            f"robot {desc.name!r}: the corner-cell monitor takes one sole for both feet; "
+            f"feet.r and feet.l differ (length, width, corner_inset = {shape[0]} vs "
+            f"{shape[1]}); give both feet the same sole in the robot TOML")
+    return RobotConfig(name=desc.name, mass=float(mass), foot_length=fr.length,
+                       foot_width=fr.width, sensor_inset=fr.corner_inset)
 
 
 def with_described_vfs(df: pd.DataFrame, robot: Any = None, **kwargs: Any) -> pd.DataFrame:
@@ -160,7 +207,7 @@ def run_described(df: pd.DataFrame, config: Any = None, robot: Any = None,
         if not all(c in df.columns for c in need):
             rob = described_robot(df, robot)
             df = with_described_vfs(df, rob)
-        out = Monitor.for_log(df, cfg).run(df)
+        out = Monitor.for_log(df, cfg, robot=robot if rob is None else rob).run(df)
         if not track:
             return out
         from grfguard.recover.track import track_recovered

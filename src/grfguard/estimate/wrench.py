@@ -84,14 +84,22 @@ def wrench_columns(est: WrenchEstimate) -> pd.DataFrame:
 
 
 def _deriv(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
-    """Savitzky-Golay (cubic) derivative of order ``order`` along axis 0. Filtered along
-    contiguous rows of the transpose: the same correlation per column, so the same bits,
-    without the strided access of ``axis=0`` on a (T, k) array."""
+    """Savitzky-Golay (cubic) derivative of order ``order`` along axis 0
+    (:func:`_derivs` with one order)."""
+    return _derivs(x, win, (order,), dt)[0]
+
+
+def _derivs(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float) -> list[np.ndarray]:
+    """Savitzky-Golay (cubic) derivatives of the orders ``orders`` along axis 0, the same
+    bits as ``savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")``: a
+    (T, k) array in one compiled pass for every order and column
+    (:func:`grfguard.kernels.savgol.savgol_many`)."""
     if x.ndim != 2:
-        return savgol_filter(x, win, 3, deriv=order, delta=dt, axis=0, mode="interp")
-    y = savgol_filter(np.ascontiguousarray(x.T), win, 3, deriv=order, delta=dt, axis=-1,
-                      mode="interp")
-    return np.ascontiguousarray(y.T)
+        return [savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")
+                for o in orders]
+    from grfguard.kernels.savgol import savgol_many
+
+    return savgol_many(x, win, orders, dt)
 
 
 def _win(seconds: float, dt: float, n: int) -> int:
@@ -130,10 +138,12 @@ def _signals(df: pd.DataFrame, robot: LoadedRobot, window: float) -> _Signals:
     # otherwise be differentiated twice through the sole positions)
     quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
     quat_I = quat_I * np.where(quat_I[:, :1] < 0, -1.0, 1.0)
-    quat_I = _deriv(quat_I, win, 0, dt)
+    gyro_I = df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float)
+    imu = _deriv(np.column_stack([quat_I, gyro_I]), win, 0, dt)  # column by column
+    quat_I, gyro_I = imu[:, :4], np.ascontiguousarray(imu[:, 4:])
     R_WI = quat_to_rotation(quat_I / np.linalg.norm(quat_I, axis=1, keepdims=True))
-    gyro_I = _deriv(df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float), win, 0, dt)
-    return _Signals(t, dt, win, q, _deriv(q, win, 1, dt), _deriv(q, win, 2, dt), R_WI, gyro_I)
+    qd, qdd = _derivs(q, win, (1, 2), dt)
+    return _Signals(t, dt, win, q, qd, qdd, R_WI, gyro_I)
 
 
 def _body_frames(robot: LoadedRobot, d: mujoco.MjData, sig: _Signals):
@@ -171,14 +181,24 @@ def _qpos_rows(robot: LoadedRobot, q: np.ndarray, quat: np.ndarray | None) -> np
     """(T, nq) configurations: base at the origin with attitude ``quat`` (identity when
     None), joints ``q``, every other coordinate at ``qpos0``."""
     m = robot.model
-    Q = np.tile(np.asarray(m.qpos0, float), (q.shape[0], 1))
+    Q = np.empty((q.shape[0], m.nq))
+    Q[:] = np.asarray(m.qpos0, float)  # broadcast: no tiled copy
     Q[:, :3] = 0.0
     if quat is None:
         Q[:, 3:7] = (1.0, 0.0, 0.0, 0.0)
     else:
         Q[:, 3:7] = quat
-    Q[:, robot.qpos_adr(robot.joint_names)] = q
+    Q[:, _index(robot.qpos_adr(robot.joint_names))] = q
     return Q
+
+
+def _index(adr) -> slice | np.ndarray:
+    """``adr`` as a slice when it is a contiguous increasing range (a plain copy instead
+    of numpy's gather/scatter), else as it is."""
+    a = np.asarray(adr, np.int64)
+    if a.size and np.array_equal(a, np.arange(a[0], a[0] + a.size)):
+        return slice(int(a[0]), int(a[0]) + a.size)
+    return a
 
 
 def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
@@ -216,6 +236,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, quat_B: np
     sites = np.array([m.site(nm).id for nm in names], np.int64)
     qvel = np.zeros((n, m.nv))
     qacc = np.zeros((n, m.nv))
+    jv = _index(jv)
     qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
     qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
     ground = np.zeros((n, 2, 6))
@@ -281,8 +302,9 @@ def _base_motion(df: pd.DataFrame, robot: LoadedRobot, sig: _Signals, R_WB: np.n
     # (base axes; attitude noise is never differentiated)
     v_loc = np.zeros((n, 3))
     a_loc = np.zeros((n, 3))
+    d1, d2 = _derivs(np.concatenate([p_rel[0], p_rel[1]], axis=1), win, (1, 2), dt)
     for i in range(2):
-        p, pd_, pdd = p_rel[i], _deriv(p_rel[i], win, 1, dt), _deriv(p_rel[i], win, 2, dt)
+        p, pd_, pdd = p_rel[i], d1[:, 3 * i:3 * i + 3], d2[:, 3 * i:3 * i + 3]
         v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
         a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
                                   + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
@@ -456,12 +478,19 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
 
 def _small_rotations(rv: np.ndarray) -> np.ndarray:
     """(T, 3, 3) rotations of small rotation vectors (T, 3) [rad], first order made
-    orthonormal."""
-    K = np.zeros((rv.shape[0], 3, 3))
+    orthonormal: the orthonormal polar factor of ``I + [rv]x`` (what its SVD's ``U V^T``
+    gives), in closed form. With ``s = sqrt(1 + |rv|^2)``, ``(I + K)^T (I + K) = s^2 I -
+    rv rv^T``, so the factor is ``(I + K) / s + rv rv^T / (s (s + 1))`` (the rotation by
+    ``atan |rv|`` about ``rv``); equal to the SVD's to about 1e-16."""
+    n = rv.shape[0]
+    s = np.sqrt(1.0 + np.einsum("ti,ti->t", rv, rv))
+    R = np.einsum("ti,tj->tij", rv, rv) / (s * (s + 1.0))[:, None, None]
+    inv = 1.0 / s
+    K = np.zeros((n, 3, 3))
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rv[:, 2], rv[:, 1], -rv[:, 0]
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rv[:, 2], -rv[:, 1], rv[:, 0]
-    U, _, Vt = np.linalg.svd(np.eye(3) + K)
-    return U @ Vt
+    K[:, 0, 0] = K[:, 1, 1] = K[:, 2, 2] = 1.0
+    return R + K * inv[:, None, None]
 
 
 def _share(w: np.ndarray, alone: np.ndarray, p_r: np.ndarray, p_l: np.ndarray) -> np.ndarray:

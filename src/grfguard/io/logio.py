@@ -69,7 +69,7 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
 
     Args:
         df: The log.
-        path: Destination; ``.csv`` writes CSV, anything else Parquet (zstd).
+        path: Destination; ``.csv`` writes CSV, anything else Parquet (LZ4).
 
     Returns:
         The path written.
@@ -105,10 +105,12 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
     return path
 
 
-#: Parquet compression of written logs: zstd at level 1 (as small as the default level
-#: 3 on sensor data once floats are byte-stream split, and faster to write).
-PARQUET_COMPRESSION = "zstd"
-PARQUET_COMPRESSION_LEVEL = 1
+#: Parquet compression of written logs: LZ4 (pyarrow's ``lz4``, Parquet's LZ4_RAW codec). On
+#: byte-stream-split sensor data it is within 2 % of zstd's size, takes about a third
+#: less CPU time to write than zstd level 1 and reads faster (BENCHMARKS.md "grfguard
+#: run end to end (issue 11)").
+PARQUET_COMPRESSION = "lz4"
+PARQUET_COMPRESSION_LEVEL = None
 #: Rows per Parquet row group (a 10-minute 1 kHz log is one group).
 PARQUET_ROW_GROUP = 1 << 20
 
@@ -120,7 +122,9 @@ def parquet_options(schema: Any) -> dict[str, Any]:
     each value grouped by significance: noisy sensor data compresses about 20 % better and
     several times faster than with dictionary tries) and no dictionary; every other
     column (booleans, integer flags, strings such as ``kind_<s>``) is dictionary
-    encoded. Values and types read back unchanged.
+    encoded. Min/max statistics are written for ``time`` only (for readers that select
+    a time range; on every column they cost about a tenth of the writing time). Values
+    and types read back unchanged.
     """
     import pyarrow as pa
 
@@ -131,6 +135,7 @@ def parquet_options(schema: Any) -> dict[str, Any]:
         "compression_level": PARQUET_COMPRESSION_LEVEL,
         "use_dictionary": others,
         "use_byte_stream_split": floats or False,
+        "write_statistics": [TIME] if TIME in schema.names else False,
         "row_group_size": PARQUET_ROW_GROUP,
     }
 

@@ -64,6 +64,11 @@ class PlausibleRanges:
         weight_n: Robot weight m g [N].
         force_min_weights: Lowest plausible sensor force, in weights (negative) [-].
         force_max_weights: Highest plausible sensor force, in weights [-].
+        virtual_min_weights: Lowest plausible virtual corner force (``vfs_<s>``), in
+            weights (negative) [-]. A load cell's reading cannot go far below zero, but the
+            virtual sensor's split of a foot's (F_z, M_x, M_y) over four corners can: about
+            -F_z / 4 at a corner opposite a CoP near the sole's edge (G1's minimum-norm
+            split); hence a range of its own, as wide as the upper bound.
         acc_max: Largest plausible |IMU acceleration| per axis [m/s^2].
         gyro_max: Largest plausible |IMU angular rate| per axis [rad/s].
         quat_norm_tol: Largest plausible | |q| - 1 | of the IMU quaternion [-].
@@ -75,6 +80,7 @@ class PlausibleRanges:
     weight_n: float
     force_min_weights: float = 0.25
     force_max_weights: float = 3.0
+    virtual_min_weights: float = 3.0
     acc_max: float = 16.0 * G
     gyro_max: float = 35.0
     quat_norm_tol: float = 0.1
@@ -85,6 +91,8 @@ class PlausibleRanges:
         check_number("plausibility", "weight_n", self.weight_n, 1.0, 1e6, "N")
         check_number("plausibility", "force_min_weights", self.force_min_weights, 0.0, 10.0, "")
         check_number("plausibility", "force_max_weights", self.force_max_weights, 0.5, 100.0, "")
+        check_number("plausibility", "virtual_min_weights", self.virtual_min_weights, 0.0,
+                     100.0, "")
         check_number("plausibility", "acc_max", self.acc_max, G, 1e4, "m/s^2")
         check_number("plausibility", "gyro_max", self.gyro_max, 1.0, 1e3, "rad/s")
         check_number("plausibility", "quat_norm_tol", self.quat_norm_tol, 1e-6, 1.0, "")
@@ -99,11 +107,18 @@ class PlausibleRanges:
         """Highest plausible sensor force [N]."""
         return self.force_max_weights * self.weight_n
 
+    @property
+    def vfs_force_lo(self) -> float:
+        """Lowest plausible virtual corner force (``vfs_<s>``) [N]."""
+        return -self.virtual_min_weights * self.weight_n
+
     def limits(self, column: str) -> tuple[float, float, str] | None:
         """(lo, hi, unit) of ``column``, or None when the column has no physical range."""
-        if column.startswith(("force_", "recovered_", "vfs_")) and not column.startswith(
+        if column.startswith("vfs_") and not column.startswith(
             ("vfs_total", "vfs_cop", "vfs_valid")
         ):
+            return self.vfs_force_lo, self.force_hi, "N"
+        if column.startswith(("force_", "recovered_")):
             return self.force_lo, self.force_hi, "N"
         if column.startswith("imu_acc_"):
             return -self.acc_max, self.acc_max, "m/s^2"

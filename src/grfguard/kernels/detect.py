@@ -69,8 +69,8 @@ N_GS = 30
  P_NOISESCAT, P_GAINCHG, P_GAINMIN, P_STETA, P_ROUNDTOL, P_CLRDROP, P_HOLD_SAT,
  P_CLRCONSTFRAC, P_CLRSPK, P_CLRVALID, P_NCLEAR, P_NCLEAR_SAT,
  P_AFAST, P_ALP, P_RGAINMIN, P_BLEND,
- P_FLO, P_FHI, P_SETTLE, P_GAPLIM, P_CHANCE) = range(52)
-N_PRM = 52
+ P_FLO, P_FHI, P_SETTLE, P_GAPLIM, P_CHANCE, P_VLO) = range(53)
+N_PRM = 53
 #: Scratch floats :func:`detect_step` needs.
 N_WS_DETECT = 72
 
@@ -79,7 +79,7 @@ ST_OK, ST_GAP, ST_BACK, ST_CONST, ST_MISSING, ST_INVALID, ST_SETTLING = range(7)
 
 
 def detect_params(config, tuning=None, recover_tuning=None, guard=None,
-                  force_range=(-math.inf, math.inf)) -> np.ndarray:
+                  force_range=(-math.inf, math.inf), vfs_force_lo=None) -> np.ndarray:
     """The parameter array of :func:`detect_step` from the frozen configs.
 
     Args:
@@ -87,7 +87,9 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
         tuning: :class:`~grfguard.detect.tuning.DetectTuning` (default one if None).
         recover_tuning: :class:`~grfguard.recover.recovery.RecoverTuning`.
         guard: :class:`~grfguard.guard.GuardConfig`.
-        force_range: Plausible force range of one sensor ``(lo, hi)`` [N].
+        force_range: Plausible force range of one sensor's reading ``(lo, hi)`` [N].
+        vfs_force_lo: Lowest plausible virtual corner force [N]
+            (:attr:`grfguard.guard.InputGuard.vfs_force_lo`; None: ``force_range[0]``).
     """
     from grfguard.detect.tuning import DetectTuning
     from grfguard.guard import GuardConfig
@@ -131,6 +133,7 @@ def detect_params(config, tuning=None, recover_tuning=None, guard=None,
     p[P_RGAINMIN] = rt.gain_min
     p[P_BLEND] = min(1.0, dt / c.blend_s) if c.blend_s > 0 else 1.0
     p[P_FLO], p[P_FHI] = float(force_range[0]), float(force_range[1])
+    p[P_VLO] = float(force_range[0] if vfs_force_lo is None else vfs_force_lo)
     p[P_SETTLE] = gd.settle_s
     p[P_GAPLIM] = max(gd.gap_s, gd.gap_periods * dt)
     return p

@@ -58,6 +58,7 @@ from grfguard.kernels.detect import (
     P_FLO,
     P_GAPLIM,
     P_SETTLE,
+    P_VLO,
     SPIKE,
     ST_GAP,
     ST_INVALID,
@@ -187,13 +188,15 @@ def _estimate(xin, xc, mode, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
 
 @njit_nort
 def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
-    """``Monitor._prepare``: range check of the virtual forces, ``Continuity.after``,
-    unusable virtual outputs set to NaN; returns ``(bounded, state code)``."""
+    """``Monitor._prepare``: range check of the virtual forces (corners from ``P_VLO``,
+    foot totals from ``2 P_FLO``), ``Continuity.after``, unusable virtual outputs set to
+    NaN; returns ``(bounded, state code)``."""
     lo = prm[P_FLO]
     hi = prm[P_FHI]
+    vlo = prm[P_VLO]
     bounded = True
     for i in range(8):
-        if not (math.isnan(v[i]) or (lo <= v[i] and v[i] <= hi)):
+        if not (math.isnan(v[i]) or (vlo <= v[i] and v[i] <= hi)):
             bounded = False
     for f in range(2):
         if not (math.isnan(tot[f]) or (2 * lo <= tot[f] and tot[f] <= 2 * hi)):
@@ -744,11 +747,12 @@ def warm_monitor() -> None:
     # the config's period serve (a monitor built for a log passes the log's rate).
     cfg = MonitorConfig()
     prm = detect_params(cfg)
-    guard = InputGuard(RobotConfig())
+    robot = RobotConfig()
+    guard = InputGuard(robot)
     from grfguard.detect.standing import StandingStage
 
     for vk in (None, VFSKernel(VirtualForceSensor())):
-        k = MonitorKernel(prm, guard, vk, StandingStage(cfg.dt_s))
+        k = MonitorKernel(prm, guard, vk, StandingStage(cfg.dt_s, weight_n=robot.weight))
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))
         k.run(x[None, :])

@@ -48,7 +48,7 @@ def standing_params(stage, dt_s: float) -> np.ndarray:
     p[_S_ON] = 1.0
     p[_S_DT] = det.dt_s
     p[_S_A] = det._a
-    p[_S_SETTLE], p[_S_BASELINE], p[_S_THR] = c.settle_s, c.baseline_s, c.threshold_n
+    p[_S_SETTLE], p[_S_BASELINE], p[_S_THR] = c.settle_s, c.baseline_s, det.threshold_n
     p[_S_PERSIST], p[_S_ISO], p[_S_RISE] = c.persist_s, c.isolation_ratio, c.drift_rise_s
     p[_S_SHIFT], p[_S_CLEAR] = c.max_shift_fraction, c.clear_s
     p[_S_AHOLD] = stage._a_hold

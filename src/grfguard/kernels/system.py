@@ -72,7 +72,8 @@ Y_V_ON, Y_V_B0, Y_V_B1, Y_V_B2, Y_V_A1, Y_V_A2, Y_V_LAM, Y_V_LIMIT, Y_V_START = 
 Y_CORSIG, Y_CORSIG_Q = 54, 55
 Y_I_GYRO, Y_I_CREF, Y_I_ZMP, Y_I_Q, Y_I_QUAT, Y_I_ACC = range(56, 62)
 Y_SHARE = 62  # 1: the twin may take the main sensor's front of the step (twin_shareable)
-N_SYSP = 63
+Y_Z_AIR = 63  # SwingZeroLearner.air_n [N]
+N_SYSP = 64
 # ------------------------------------------------------------------ state (syss)
 S_M11, S_M12, S_M22, S_B1, S_B2 = range(5)
 S_TH, S_SUMR, S_SUMV, S_SRF, S_SVF, S_MVF, S_AF, S_LOADED, S_ARMED = 5, 8, 9, 10, 12, 14, 18, 20, 21
@@ -120,6 +121,7 @@ def system_params(mon: Any, in_cols: tuple[str, ...], has_gyro: bool = True) -> 
     p[Y_Z_MAXN] = z.learn_s / mon.zeros.dt_s
     p[Y_Z_LIMIT], p[Y_Z_DEAD] = mon.zeros.limit_n, mon.zeros.deadband_n
     p[Y_Z_SWFRAC] = z.swing_load_fraction
+    p[Y_Z_AIR] = mon.zeros.air_n
     g = mon.gyro_bias.config
 
     def idx(col: str) -> float:
@@ -456,6 +458,14 @@ def _zeros_update(yp, ys, ss, x, tot, cref, cest):
         if ys[S_SWS + f] <= yp[Y_Z_SETTLE]:
             continue
         ys[S_FOOTN + f] += 1.0
+        # SwingZeroLearner._in_air: the readings less the zeros so far sum to ~0
+        s = 0.0
+        for i in range(4 * f, 4 * f + 4):
+            if math.isfinite(x[i]):
+                n = ys[S_ZN + i]
+                s += x[i] - (ys[S_ZSUM + i] / n if n > 0 else 0.0)
+        if not abs(s) <= yp[Y_Z_AIR]:
+            continue
         for i in range(4 * f, 4 * f + 4):
             m = x[i]
             n = ys[S_ZN + i]

@@ -32,4 +32,8 @@ def warm_up() -> float:
     from grfguard.kernels.monitor import warm_monitor
 
     warm_monitor()
+    from grfguard.kernels import channels, savgol  # described robots: channels, filters
+
+    channels.warm()
+    savgol.warm()
     return time.perf_counter() - t0

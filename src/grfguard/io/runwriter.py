@@ -1,0 +1,200 @@
+"""``grfguard run``'s output written block by block from the compiled monitor's arrays.
+
+:func:`write_run` is ``write_log(monitor.run(log), path)`` for a Parquet ``path`` without
+the output DataFrame: the compiled loop (:func:`grfguard.kernels.monitor.monitor_run_packed`)
+runs over blocks of :data:`BLOCK_ROWS` rows, each block's output columns go straight
+from the kernel's arrays into Arrow arrays (text columns from their integer codes, no
+Python string per row) and are written as one Parquet row group, then the buffers are
+reused. The file holds the same columns, in the same order, with the same Arrow types,
+values, nulls and metadata as the frame path (``tests/test_run_io.py`` compares the two
+files column by column); only the row groups differ (one per block).
+
+Everything the frame path does per column is repeated here: a NaN of a float column is
+written as a null (as :meth:`pyarrow.Table.from_pandas` does), the log's own columns
+keep their types (non-float ones converted by ``from_pandas``), the output columns that
+the log already carries replace them in place, and the metadata is the log's ``attrs``
+plus ``monitor`` (:meth:`grfguard.pipeline.Monitor.describe`) under the key
+``grfguard``, without pandas' own.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["write_run", "BLOCK_ROWS"]
+
+#: Rows per block (and per Parquet row group) of :func:`write_run`: the block's output
+#: buffers (about 30 MB) are reused, so no fresh memory is page-faulted per block.
+BLOCK_ROWS = 1 << 17
+#: Rows per call of the compiled loop inside a block: its row-major input and output
+#: buffers stay in the cache while they are transposed into the column-major block.
+_CHUNK = 1 << 12
+
+
+def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS) -> int | None:
+    """Run ``mon`` (a :class:`~grfguard.pipeline.Monitor`, reset first) over ``log`` and
+    write the output to the Parquet file ``path`` (atomically, as
+    :func:`~grfguard.io.logio.write_log`), block by block.
+
+    Returns:
+        The number of rows written, or None (nothing written) when the monitor does not
+        run compiled: then ``write_log(mon.run(log), path)`` is the way.
+
+    Raises:
+        LogFormatError: ``time`` or a ``force_<s>`` column is missing.
+        OutputError: ``path`` could not be written (nothing is changed).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from grfguard.io.logio import METADATA_KEY, parquet_options, to_jsonable
+    from grfguard.io.safe import atomic_path
+
+    k = mon._batch_kernel(log)
+    if k is None:
+        return None
+    n = len(log)
+    blocks = _Blocks(mon, k, log, max(1, min(rows, n)))
+    meta = json.dumps(to_jsonable({**log.attrs, "monitor": mon.describe()}), sort_keys=True)
+    first = blocks.block(0, min(n, rows))
+    schema = pa.schema([pa.field(c, a.type) for c, a in first.items()],
+                       metadata={METADATA_KEY: meta.encode()})
+    opts = parquet_options(schema)
+    opts.pop("row_group_size")
+    with atomic_path(Path(path), what="log") as tmp:
+        try:
+            with pq.ParquetWriter(tmp, schema, **opts) as writer:
+                writer.write_table(_table(first, schema))
+                del first
+                for a in range(rows, n, rows):
+                    writer.write_table(_table(blocks.block(a, min(n, a + rows)), schema))
+        except pa.ArrowException as exc:  # pragma: no cover - pyarrow wraps some OS errors
+            raise OSError(errno.EIO, str(exc)) from None
+    return n
+
+
+def _table(cols: dict[str, Any], schema: Any) -> Any:
+    """The block as a table of ``schema`` (its types checked, never cast)."""
+    import pyarrow as pa
+
+    return pa.Table.from_arrays(list(cols.values()), schema=schema)
+
+
+def _arrow(values: Any) -> Any:
+    """A pandas column (or array) as the Arrow array ``from_pandas`` makes of it: numpy
+    float64, integers and booleans without a copy of the values (NaN becomes null),
+    anything else converted by pyarrow as ``from_pandas`` converts it."""
+    import pyarrow as pa
+
+    dtype = getattr(values, "dtype", None)
+    if isinstance(dtype, np.dtype) and dtype.kind in "biuf":
+        a = np.asarray(values)
+        if dtype == np.float64:
+            return _float_array(a)
+        if dtype.kind in "biu":
+            return pa.array(a)
+    return pa.array(values, from_pandas=True)
+
+
+def _float_array(a: np.ndarray) -> Any:
+    """float64 ``a`` as Arrow (no copy of the values), NaN as null."""
+    import pyarrow as pa
+
+    nan = np.isnan(a)
+    return pa.array(a, mask=nan) if nan.any() else pa.array(a)
+
+
+class _Blocks:
+    """The compiled monitor over ``log`` block by block (in row order: the monitor's state
+    carries over); :meth:`block` returns the output row group of rows ``a:b`` as named
+    Arrow arrays (the log's columns, then the monitor's)."""
+
+    def __init__(self, mon: Any, k: Any, log: Any, rows: int) -> None:
+        from grfguard.kernels import monitor as km
+
+        log = log.copy(deep=False)
+        log.attrs = {}  # column access would deep-copy the metadata every time
+        self.km, self.mon, self.k, self.log = km, mon, k, log
+        self.new = self._new_names()
+        self.src = [(km._column(log, c) if c in log.columns else None) for c in k.in_cols]
+        # the log's own columns (those the monitor does not replace), converted once
+        self.keep = {c: _arrow(log[c]) for c in log.columns if c not in self.new}
+        self.order = [*log.columns, *(c for c in self.new if c not in log.columns)]
+        m = min(_CHUNK, rows)
+        self.X = np.empty((m, len(k.in_cols)))
+        self.Yc = np.empty((m, len(k.out_cols)))
+        self.EXc = np.empty((m, km.N_EX))
+        self.Y = np.empty((len(k.out_cols), rows))  # each output column contiguous
+        self.EX = np.empty((rows, km.N_EX))
+
+    def _new_names(self) -> list[str]:
+        """The monitor's output columns in ``run_frame``'s order."""
+        km, k = self.km, self.k
+        names = list(km.OUT_COLUMNS) if k.with_vfs else []
+        for i in range(8):
+            names += [km._FLAG_COLS[i], km._KIND_COLS[i]]
+        for i in range(8):
+            names += [km._REC_COLS[i], km._ETA_COLS[i]]
+        if k.with_system:
+            names += ["model_mismatch", "model_mismatch_reason"]
+        return [*names, "system_state", "system_reason"]
+
+    def _loop(self, a: int, b: int) -> None:
+        """The compiled loop over rows ``a:b`` into the block buffers."""
+        km, k = self.km, self.k
+        for s in range(a, b, _CHUNK):
+            e = min(b, s + _CHUNK)
+            xb = self.X[: e - s]
+            for j, arr in enumerate(self.src):
+                xb[:, j] = arr[s:e] if arr is not None else math.nan
+            yb, eb = self.Yc[: e - s], self.EXc[: e - s]
+            km.monitor_run_packed(xb, yb, eb, k.F, k.I)
+            self.Y[:, s - a:e - a] = yb.T
+            self.EX[s - a:e - a] = eb
+
+    def block(self, a: int, b: int) -> dict[str, Any]:
+        import pyarrow as pa
+
+        km, k = self.km, self.k
+        self._loop(a, b)
+        m = b - a
+        Y, EX = self.Y[:, :m], self.EX[:m]
+        new: dict[str, Any] = {}
+        o = 0
+        if k.with_vfs:
+            for j, c in enumerate(km.OUT_COLUMNS):
+                new[c] = _float_array(Y[j])
+            o = km._NV
+        for i in range(8):
+            new[km._FLAG_COLS[i]] = pa.array(Y[o + i] != 0.0)
+            new[km._KIND_COLS[i]] = _names(Y[o + 8 + i], km.KIND_NAMES)
+        for i in range(8):
+            new[km._REC_COLS[i]] = _float_array(Y[o + 24 + i])
+            new[km._ETA_COLS[i]] = _float_array(Y[o + 16 + i])
+        if k.with_system:
+            new["model_mismatch"] = pa.array(Y[o + 33] != 0.0)
+            new["model_mismatch_reason"] = _arrow(km._mismatch_reasons(Y[o + 33:].T,
+                                                                        k.vib_config))
+        codes = Y[o + 32].astype(np.int64)
+        new["system_state"] = _names(codes, km.SYSTEM_STATES)
+        part = self.log.iloc[a:b] if (EX[:, 0] != 0.0).any() else None
+        new["system_reason"] = _arrow(km._reasons(self.mon, part, codes, self.src[0][a:b],
+                                                  EX))
+        return {c: (new[c] if c in new else self.keep[c].slice(a, m)) for c in self.order}
+
+
+def _names(codes: np.ndarray, names: Any) -> Any:
+    """``names[codes]`` as an Arrow ``large_string`` array (the type pandas' ``str``
+    columns are written with)."""
+    import pyarrow as pa
+
+    idx = np.asarray(codes).astype(np.int64)
+    if idx.size and (idx.min() < 0 or idx.max() >= len(names)):
+        raise IndexError(f"codes must be in [0, {len(names)}), got {idx.min()}..{idx.max()}")
+    return pa.array(list(names), type=pa.large_string()).take(pa.array(idx))

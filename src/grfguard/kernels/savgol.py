@@ -1,0 +1,120 @@
+"""Savitzky-Golay filters of several derivative orders over many columns in one compiled
+pass, bit for bit as ``scipy.signal.savgol_filter(..., mode="interp")``.
+
+scipy filters one column and one order at a time (``ndimage.correlate1d``, a scalar loop
+over the taps per output sample). Here the taps run over blocks of 256 output samples of
+one column at once (a loop the compiler vectorises), every requested order sharing the
+column's block, in the same order of operations as scipy's ``NI_Correlate1D``: for a
+filter symmetric within ``DBL_EPSILON`` ``y = x[k] w[h] + sum_{j=-h}^{-1} (x[k+j] +
+x[k-j]) w[h+j]``; antisymmetric the same with ``x[k+j] - x[k-j]``; otherwise ``y =
+x[k+h] w[2h] + sum_{j=-h}^{h-1} x[k+j] w[h+j]`` (the weights are ``savgol_coeffs``
+reversed, as ``convolve1d`` passes them). The first and last ``h`` samples are scipy's
+own polynomial fit of the edge windows (``_fit_edges_polyfit``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grfguard.kernels._jit import njit, view1d
+
+__all__ = ["savgol_block", "savgol_many", "warm"]
+
+#: Output samples per block (a block of each order's accumulator stays in L1).
+BLOCK = 256
+
+
+@njit
+def _taps(flat, row, k0, nb, w, h, sym, a, t):
+    """One order on the block ``[k0, k0 + nb)`` of the column starting at ``row`` into
+    ``a`` (``t``: scratch). Each tap is one pass over the block: the passes keep scipy's
+    order of additions per sample, and the loop over the block vectorises."""
+    win = 2 * h + 1
+    if sym == 0:
+        xs = view1d(flat, row + k0 + h, nb)
+        w0 = w[win - 1]
+        for i in range(nb):
+            a[i] = xs[i] * w0
+        for jj in range(-h, h):
+            wj = w[h + jj]
+            xs = view1d(flat, row + k0 + jj, nb)
+            for i in range(nb):
+                a[i] += xs[i] * wj
+        return
+    xs = view1d(flat, row + k0, nb)
+    w0 = w[h]
+    for i in range(nb):
+        a[i] = xs[i] * w0
+    for jj in range(-h, 0):
+        wj = w[h + jj]
+        xa = view1d(flat, row + k0 + jj, nb)
+        xb = view1d(flat, row + k0 - jj, nb)
+        if sym > 0:
+            for i in range(nb):
+                t[i] = xa[i] + xb[i]
+        else:
+            for i in range(nb):
+                t[i] = xa[i] - xb[i]
+        for i in range(nb):
+            a[i] += t[i] * wj
+
+
+@njit
+def savgol_block(xt, W, sym, out):
+    """Interior samples of every order: ``xt`` (m, n) C-contiguous columns, ``W``
+    (orders, win) correlation weights, ``sym`` (orders,) 1 / -1 / 0, ``out`` (orders,
+    m, n) (the first and last ``win // 2`` samples are left as they are)."""
+    m, n = xt.shape
+    no, win = W.shape
+    h = win // 2
+    flat = xt.ravel()
+    a = np.empty(BLOCK)  # the order's block (plain arrays: kept alive by numba)
+    tb = np.empty(BLOCK)  # pair sums / differences of one tap, rounded as in scipy
+    for c in range(m):
+        row = c * n
+        for k0 in range(h, n - h, BLOCK):
+            nb = min(BLOCK, n - h - k0)
+            for o in range(no):
+                _taps(flat, row, k0, nb, W[o], h, sym[o], a, tb)
+                for i in range(nb):
+                    out[o, c, k0 + i] = a[i]
+
+
+def _symmetry(w: np.ndarray) -> int:
+    """scipy's test: 1 symmetric, -1 antisymmetric (within DBL_EPSILON), else 0."""
+    h = w.size // 2
+    eps = np.finfo(float).eps
+    d = np.abs(w[h + 1:] - w[h - 1::-1]) if h else np.zeros(0)
+    if (d <= eps).all():
+        return 1
+    s = np.abs(w[h + 1:] + w[h - 1::-1]) if h else np.zeros(0)
+    return -1 if (s <= eps).all() else 0
+
+
+def savgol_many(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float,
+                polyorder: int = 3) -> list[np.ndarray]:
+    """``savgol_filter(x, win, polyorder, deriv=o, delta=dt, axis=0, mode="interp")`` of a
+    (T, m) array for every ``o`` in ``orders``, the same bits, in one pass."""
+    from scipy.signal import savgol_coeffs
+    from scipy.signal._savitzky_golay import _fit_edges_polyfit
+
+    x = np.asarray(x, float)
+    if x.ndim != 2 or win % 2 == 0 or win > x.shape[0]:
+        raise ValueError(f"savgol_many needs a (T, m) array and an odd window <= T, got "
+                         f"{x.shape} and {win}")
+    W = np.array([np.asarray(savgol_coeffs(win, polyorder, deriv=o, delta=dt))[::-1]
+                  for o in orders])
+    sym = np.array([_symmetry(w) for w in W], np.int64)
+    xt = np.ascontiguousarray(x.T)
+    out = np.empty((len(orders),) + xt.shape)
+    savgol_block(xt, W, sym, out)
+    res = []
+    for i, o in enumerate(orders):
+        y = np.asarray(_fit_edges_polyfit(xt, win, polyorder, o, dt, -1, out[i]))
+        res.append(np.ascontiguousarray(y.T))
+    return res
+
+
+def warm() -> None:
+    """Compile (or load) the kernel on a tiny input."""
+    savgol_many(np.zeros((7, 2)), 5, (0, 1, 2), 0.001)
