@@ -100,7 +100,7 @@ def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
     out = tmp_path / "out.parquet"
     marks: list[str] = []
     n = run_log(path, out, phase=marks.append)
-    assert marks == ["read", "checks", "monitor_setup", "run_write"]  # block by block
+    assert marks == ["read", "checks", "monitor_setup", "kernel_setup", "run_write"]
     got = read_log(out)
     assert n == len(got)
     log = read_log(path)

@@ -241,6 +241,8 @@ def run(
                 robot=robot, time_order=time_order, unit_check=unit_check,
                 topics_map=topics_map, compiled=compiled)
     _say(f"wrote {output}: {n} samples")
+    global _FAST_EXIT
+    _FAST_EXIT = True
 
 
 def run_log(
@@ -261,9 +263,9 @@ def run_log(
     """``grfguard run`` without the command line: read ``log``, run the monitor, write
     ``output``; returns the number of samples written. ``phase(name)`` (optional) is
     called at the end of each step (``read``, ``checks``, ``monitor_setup``, then
-    ``run_write`` when the compiled monitor writes a Parquet output block by block,
-    otherwise ``monitor_run`` and ``write``: ``benchmarks/bench_run_cli.py`` times
-    them)."""
+    ``kernel_setup`` and ``run_write`` when the compiled monitor writes a Parquet output
+    block by block, otherwise ``monitor_run`` and ``write``:
+    ``benchmarks/bench_run_cli.py`` times them)."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.anyread import read_any
     from grfguard.io.logio import write_log
@@ -358,13 +360,14 @@ def _run_monitor(
         from grfguard.cli_calib import corrected_log_and_config
 
         df, cfg = corrected_log_and_config(df, thresholds, cfg)
-    mon = Monitor.for_log(df, config=cfg)
+    batch = output is not None and output.suffix.lower() != ".csv"
+    mon = Monitor.for_log(df, config=cfg, warm=not batch)  # batch: loads only its loop
     if mark is not None:
         mark("monitor_setup")
-    if output is not None and output.suffix.lower() != ".csv":
+    if batch:
         from grfguard.io.runwriter import write_run
 
-        n = write_run(mon, df, output)
+        n = write_run(mon, df, output, phase=mark)
         if n is not None:
             return n
     return mon.run(df)
@@ -597,7 +600,27 @@ _register_ros(app, _friendly)
 
 def main() -> None:
     """Console-script entry point."""
-    app()
+    import os
+
+    # no command renders with MuJoCo: skip its OpenGL bindings (glfw, about 60 ms of
+    # start-up); an explicit MUJOCO_GL is kept
+    os.environ.setdefault("MUJOCO_GL", "disable")
+    try:
+        app()
+    except SystemExit as exc:
+        if not (_FAST_EXIT and exc.code in (0, None)):
+            raise
+    if _FAST_EXIT:  # `run` wrote its output (renamed into place): nothing left to do
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)  # skips the interpreter's teardown (about 0.3 s after a long log)
+
+
+#: Set by a command whose work is complete (outputs closed and renamed): :func:`main` then
+#: ends the process without the interpreter's teardown (freeing every module and
+#: array; nothing left to flush). Only :func:`main` (the console script) acts on it;
+#: commands called in-process (tests, ``CliRunner``) are not affected.
+_FAST_EXIT = False
 
 
 if __name__ == "__main__":  # pragma: no cover

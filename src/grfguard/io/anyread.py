@@ -11,6 +11,15 @@ from grfguard.errors import ConfigError
 
 __all__ = ["read_any"]
 
+#: File suffixes of ROS bags (:func:`grfguard.io.rosbag.is_bag`; a rosbag2 directory too).
+_BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+
+
+def _is_bag(p: Path) -> bool:
+    from grfguard.io.rosbag import is_bag  # the bag reader only for bags (30 ms import)
+
+    return is_bag(p)
+
 
 def read_any(
     path: str | Path, topics_map: str | Path | None = None, time_order: str = "strict",
@@ -25,10 +34,8 @@ def read_any(
         ConfigError: A topics map was given for a file that is not a bag.
         LogFormatError: The input cannot be read (the message says why).
     """
-    from grfguard.io.rosbag import is_bag
-
     p = Path(path)
-    if p.exists() and is_bag(p):
+    if p.exists() and (p.is_dir() or p.suffix.lower() in _BAG_SUFFIXES) and _is_bag(p):
         import warnings
 
         from grfguard.io.logio import validate_log

@@ -37,10 +37,14 @@ BLOCK_ROWS = 1 << 17
 _CHUNK = 1 << 12
 
 
-def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS) -> int | None:
+def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
+              phase: Any = None) -> int | None:
     """Run ``mon`` (a :class:`~grfguard.pipeline.Monitor`, reset first) over ``log`` and
     write the output to the Parquet file ``path`` (atomically, as
     :func:`~grfguard.io.logio.write_log`), block by block.
+
+    ``phase("kernel_setup")`` (optional) is called once the compiled loop is loaded (from
+    numba's on-disk cache, or compiled), before the first row runs.
 
     Returns:
         The number of rows written, or None (nothing written) when the monitor does not
@@ -59,6 +63,13 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS) -> i
     k = mon._batch_kernel(log)
     if k is None:
         return None
+    from grfguard.kernels import monitor as km
+
+    # load the loop now (a call over no rows): the blocks then time only the rows
+    km.monitor_run_packed(np.empty((0, len(k.in_cols))), np.empty((0, len(k.out_cols))),
+                          np.empty((0, km.N_EX)), k.F, k.I)
+    if phase is not None:
+        phase("kernel_setup")
     n = len(log)
     blocks = _Blocks(mon, k, log, max(1, min(rows, n)))
     meta = json.dumps(to_jsonable({**log.attrs, "monitor": mon.describe()}), sort_keys=True)
