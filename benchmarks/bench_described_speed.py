@@ -73,6 +73,32 @@ STAGES = {
 }
 
 
+#: Analysis written with the figures (by hand; re-runs keep it).
+NOTES = """
+Where the time goes now (Talos, "after" column): the compiled inverse dynamics
+(`grfguard.kernels.rne.wrench_batch`: kinematics of 60 bodies, `cdof`, velocities,
+accelerations, body forces, sole and F/T wrenches) 10.8 µs of 19.2 µs per sample; the
+first kinematics pass (`frames_batch`) 2.4; the SVD of the leveled attitude 1.9; the
+Savitzky-Golay filters 1.9 (were 5.9: `grfguard.kernels.savgol`, bit-identical to scipy);
+the channel monitor 0.6 (was 22.9: `grfguard.kernels.channels`, bit-identical to the
+former Python path, `tests/reference/channels.py`); assembly about 1.5. `run_described`
+outputs are bit-identical to before for both robots (last column) and on two faulty
+12 s Talos walks (offset, drift, gain, frozen; flags, kinds, onsets, recovered forces).
+
+Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
+kinematics included): **not met**: 52 k samples/s for the whole Talos monitor (22 k
+before this work, 13-18 k in the first run below). 300 k/s is 3.3 µs per sample. Left, in
+order of size: (1) the inverse dynamics, 10.8 µs (7x needed; the second kinematics pass
+inside it could reuse `frames_batch`'s base-relative poses, the base attitude being the
+only difference); (2) `frames_batch`, 2.4 µs; (3) the leveled attitude's SVD, 1.9 µs: a
+closed-form polar factor equals it to 6e-15 but moved the wrenches by 3e-6 N, because
+`rotations.rotation_to_quat` (a square root per component) turns 1e-15 of a near-identity
+rotation into 1e-8 rad; that conversion must be made accurate first (an output change
+to make on purpose); (4) the filters, 1.9 µs, bit-identical; an FFT or recursive form
+would cost a few tenths but change the last bits.
+"""
+
+
 class _Timers:
     """Exclusive CPU time of wrapped module functions (nested wrapped calls excluded)."""
 
@@ -275,7 +301,8 @@ def main(argv: list[str] | None = None) -> None:
         "times of `grfguard.estimate.wrench`'s stage functions in the best whole run. "
         + ("\"Before\": the sources of `" + a.before_src + "` timed in a subprocess of the "
            "same run; \"after\": this tree." if before else "") + "\n\n"
-        + _table(after, before, diffs) + "\n\n" + "\n".join(f"- {ln}" for ln in refs) + "\n")
+        + _table(after, before, diffs) + "\n\n" + "\n".join(f"- {ln}" for ln in refs) + "\n"
+        + NOTES)
     print(body)
     if not a.no_write:
         _write(body)
