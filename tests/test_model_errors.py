@@ -66,10 +66,22 @@ def test_learners_ignore_motion_and_faults() -> None:
         b = g.update([0.005, 0.0, 0.0], [1.0, 1.0], [0.0, 0.0])
     assert b == (0.0, 0.0, 0.0)
     z = SwingZeroLearner(SURALP, dt_s=0.001)
-    for _ in range(2000):  # a 100 N offset in swing is a fault, not a zero
-        zs = z.update([100.0, 8.0, 0.0, 0.0, 0, 0, 0, 0], [0.0, 500.0], [False, True],
+    for _ in range(2000):  # a 30 N offset in swing is a fault (beyond 20 N), not a zero
+        zs = z.update([30.0, 8.0, 0.0, 0.0, 0, 0, 0, 0], [0.0, 500.0], [False, True],
                       [False] * 8)
     assert zs[0] == 0.0 and zs[1] == pytest.approx(8.0) and zs[4] == 0.0
+    # 100 N: flagged at once by the swing test, left out of the in-the-air sum
+    z = SwingZeroLearner(SURALP, dt_s=0.001)
+    for _ in range(2000):
+        zs = z.update([100.0, 8.0, 0.0, 0.0, 0, 0, 0, 0], [0.0, 500.0], [False, True],
+                      [True] + [False] * 7)
+    assert zs[0] == 0.0 and zs[1] == pytest.approx(8.0) and zs[4] == 0.0
+    # unflagged, 108 N on the sole: the readings say the foot is not in the air
+    z = SwingZeroLearner(SURALP, dt_s=0.001)
+    for _ in range(2000):
+        zs = z.update([100.0, 8.0, 0.0, 0.0, 0, 0, 0, 0], [0.0, 500.0], [False, True],
+                      [False] * 8)
+    assert not zs.any() and z.armed(0)
 
 
 def test_imu_mounting_tilt_is_learned_from_the_flat_soles() -> None:

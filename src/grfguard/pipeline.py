@@ -453,21 +453,28 @@ class Monitor:
         self._quiet_config = self.config.with_thresholds(dataclasses.replace(
             th, corner_sigma=th.corner_sigma * self.vibration.config.corner_sigma_scale))
 
-    def _vibration_frame(self, clean: pd.DataFrame, vdf: Any, n: int) -> tuple[Any, int]:
+    def _vibration_start(self, clean: pd.DataFrame, n: int) -> int:
         """Batch twin of the vibration switch: the first switched sample (``n`` when
-        never) and the VFS outputs with the quiet sensor's rows from there on."""
-        if self.vibration is None or vdf is None:
-            return vdf, n
-        k_vib = self.vibration.run(
+        never or without the switch)."""
+        if self.vibration is None or self.vfs is None:
+            return n
+        return self.vibration.run(
             pd.to_numeric(clean[IMU_ACC[0]], errors="coerce").to_numpy(float),
             pd.to_numeric(clean[IMU_ACC[1]], errors="coerce").to_numpy(float))
-        if k_vib < n:
-            vq = self.vfs_quiet.run(clean)
-            self.vfs_quiet.reset()
-            vdf = vdf.copy()
-            qcols = [c for c in vdf.columns if c in vq.columns]
-            vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
-        return vdf, k_vib
+
+    def _vibration_frame(self, clean: pd.DataFrame, vdf: Any, k_vib: int,
+                         resets: np.ndarray) -> Any:
+        """The VFS outputs with the quiet sensor's rows from ``k_vib`` on; the quiet
+        sensor is resynced where the main one is (``resets``), never reset: as the main
+        sensor it holds its last output over unusable samples and keeps its filters,
+        attitude and odometry across a break (as ``update`` and the compiled monitor)."""
+        if vdf is None or k_vib >= len(vdf):
+            return vdf
+        vq = self.vfs_quiet.run_resynced(clean, resets)
+        vdf = vdf.copy()
+        qcols = [c for c in vdf.columns if c in vq.columns]
+        vdf.loc[vdf.index[k_vib:], qcols] = vq[qcols].iloc[k_vib:].to_numpy()
+        return vdf
 
     def _vibration_on(self) -> None:
         """Switch the detector to the widened corner threshold (once); the virtual forces
@@ -640,8 +647,8 @@ class Monitor:
         reset = self.continuity.before(tstate)
         if reset and self.vfs is not None:
             self.vfs.resync()  # forget the finite-difference history only
-            if self.vfs_quiet is not None:
-                self.vfs_quiet.reset()
+            if self.vfs_quiet is not None:  # the twin too (it keeps its odometry)
+                self.vfs_quiet.resync()
         vout = self._vfs_row(clean)
         if self.vibration is not None:
             try:
@@ -861,17 +868,22 @@ class Monitor:
         times = [self.time_guard.step(t) for t in t_raw]
         resets = np.zeros(n, dtype=bool)
         vdf = None
+        k_vib = self._vibration_start(clean, n)
         if self.vfs is not None:
             self.vfs.check_columns(log.columns)
-            valid_in = self.vfs.input_valid(clean) if n else np.zeros(0, bool)
+            valid_in = np.asarray(self.vfs.input_valid(clean) if n else np.zeros(0, bool),
+                                  dtype=bool)
+            if k_vib < n:  # once switched, the twin's validity decides (as in update)
+                valid_in = valid_in.copy()
+                valid_in[k_vib:] = self.vfs_quiet.input_valid(clean)[k_vib:]
             gap = np.array([q[1] == "time_gap" for q in times], dtype=bool)
-            resets[1:] = gap[1:] | ~np.asarray(valid_in[:-1], dtype=bool)
+            resets[1:] = gap[1:] | ~valid_in[:-1]
             if not resets.any():
                 vdf = self.vfs.run(clean)
                 self.vfs.reset()
             else:  # resynced where the streaming monitor resyncs it
                 vdf = self.vfs.run_resynced(clean, resets)
-        vdf, k_vib = self._vibration_frame(clean, vdf, n)
+        vdf = self._vibration_frame(clean, vdf, k_vib, resets)
         prep = self._prepare_frame(log, clean, vdf if vdf is not None else clean, times,
                                    reasons, resets)
         if self.config.method == "paper":

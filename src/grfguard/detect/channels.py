@@ -358,20 +358,19 @@ class ChannelMonitor:
         if self.dt_s is None and t.size > 1:
             self.dt_s = float(np.median(np.diff(t)))
         n, m = t.size, len(chans)
-        X = np.empty((m, n))
-        V = np.empty((m, n))
-        for j, c in enumerate(chans):
-            X[j] = log[c].to_numpy(float)
-            V[j] = log[f"vfs_{c[3:]}"].to_numpy(float)
+        # one frame access per block (each access deep-copies the log's attrs)
+        X = np.ascontiguousarray(log[chans].to_numpy(float)).reshape(n, m)
+        V = np.ascontiguousarray(log[[f"vfs_{c[3:]}" for c in chans]].to_numpy(float)
+                                 ).reshape(n, m)
         ks = self._k = self._kernel_state(chans, min(n, _MAX_EXCURSION + 1))
-        outs = (np.zeros((m, n), bool), np.zeros((m, n), np.int8), np.zeros((m, n)),
-                np.zeros((m, n)), np.zeros((m, n)))
+        outs = (np.zeros((n, m), bool), np.zeros((n, m), np.int8), np.zeros((n, m)),
+                np.zeros((n, m)), np.zeros((n, m)))
         channels_run(t, np.ascontiguousarray(cr), np.ascontiguousarray(cl), X, V, ks["side"],
                      ks["sigma"], ks["prm"], ks["fst"], ks["ist"], ks["exc"], ks["gate"],
                      *outs)
         if n:
             self._t_prev = float(t[-1])
-        cols = {f"{name}_{c}": (_kinds(a[j], KIND_NAMES) if name == "kind" else a[j])
+        cols = {f"{name}_{c}": (_kinds(a[:, j], KIND_NAMES) if name == "kind" else a[:, j])
                 for j, c in enumerate(chans) for name, a in zip(_OUT_NAMES, outs, strict=True)}
         if any(k in log.columns for k in cols):
             out = log.copy()
@@ -444,14 +443,14 @@ class ChannelMonitor:
         m = len(self.channels)
         if ks is None:
             ks = self._k = self._kernel_state(self.channels, 64)
-            ks["buf"] = (np.zeros((m, 1)), np.zeros((m, 1)), np.zeros((m, 1), bool),
-                         np.zeros((m, 1), np.int8), np.zeros((m, 1)), np.zeros((m, 1)),
-                         np.zeros((m, 1)))
+            ks["buf"] = (np.zeros((1, m)), np.zeros((1, m)), np.zeros((1, m), bool),
+                         np.zeros((1, m), np.int8), np.zeros((1, m)), np.zeros((1, m)),
+                         np.zeros((1, m)))
         if ks["dt"] != self.dt_s:  # the rate became known (second sample)
             self._set_rate(ks)
         X, V, fl, kd, fe, rc, on = ks["buf"]
-        X[:, 0] = xs
-        V[:, 0] = vs
+        X[0] = xs
+        V[0] = vs
         longest = channels_sample(0, t, cr, cl, X, V, ks["side"], ks["sigma"], ks["prm"],
                                   ks["fst"], ks["ist"], ks["exc"], ks["gate"],
                                   fl, kd, fe, rc, on)
@@ -460,5 +459,5 @@ class ChannelMonitor:
             exc = np.zeros((m, min(2 * cap, _MAX_EXCURSION + 1), 3))
             exc[:, :cap] = ks["exc"]
             ks["exc"] = exc
-        return [(bool(fl[j, 0]), KIND_NAMES[kd[j, 0]], float(fe[j, 0]), float(rc[j, 0]),
-                 float(on[j, 0])) for j in range(m)]
+        return [(bool(fl[0, j]), KIND_NAMES[kd[0, j]], float(fe[0, j]), float(rc[0, j]),
+                 float(on[0, j])) for j in range(m)]

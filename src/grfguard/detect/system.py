@@ -337,8 +337,8 @@ class SwingZeroConfig:
         swing_load_fraction: The foot is in swing when its virtual load is below this
             fraction of the weight (and contact is neither planned nor estimated).
         air_fraction: A swing sample is learned from only when the foot's readings say it
-            is in the air: the sum of its four readings minus their zeros learned so far is
-            within this fraction of the weight. A planned swing is not always in the air
+            is in the air: the sum of its unflagged readings minus their zeros learned so
+            far is within this fraction of the weight. A planned swing is not always in the air
             (a foot that lands before the plan says, as G1's does, reads its heel cells
             during the last 0.1-0.2 s of the swing): those samples would be learned as
             zeros. 0.05: 56 N on SURALP, 16 N on G1.
@@ -450,7 +450,7 @@ class SwingZeroLearner:
             if self._swing_s[f] <= c.settle_s:
                 continue
             self._foot_n[f] += 1
-            if not self._in_air(m, f):
+            if not self._in_air(m, f, flagged):
                 continue
             for i in range(4 * f, 4 * f + 4):
                 if flagged[i] or not math.isfinite(m[i]) or self._n[i] >= max_n:
@@ -462,14 +462,14 @@ class SwingZeroLearner:
                 self._cache = None
         return self.zeros_n
 
-    def _in_air(self, m: np.ndarray, f: int) -> bool:
-        """The readings of foot ``f`` say it carries nothing: the sum of its finite
-        readings less their zeros learned so far (0 before any) is within
+    def _in_air(self, m: np.ndarray, f: int, flagged: Sequence[bool]) -> bool:
+        """The readings of foot ``f`` say it carries nothing: the sum of its finite,
+        unflagged readings less their zeros learned so far (0 before any) is within
         ``air_fraction`` of the weight (the compiled twin adds in the same order)."""
         s = 0.0
         for i in range(4 * f, 4 * f + 4):
             q = float(m[i])
-            if math.isfinite(q):
+            if math.isfinite(q) and not flagged[i]:
                 n = self._n[i]
                 s += q - (float(self._sum[i] / n) if n > 0 else 0.0)
         return abs(s) <= self.air_n

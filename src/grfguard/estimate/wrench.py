@@ -93,7 +93,9 @@ def _derivs(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float) -> list
     """Savitzky-Golay (cubic) derivatives of the orders ``orders`` along axis 0, the same
     bits as ``savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")``: a
     (T, k) array in one compiled pass for every order and column
-    (:func:`grfguard.kernels.savgol.savgol_many`)."""
+    (:func:`grfguard.kernels.savgol.savgol_many`). The edges are scipy's polynomial fit
+    of all ``k`` columns at once, whose rounding depends on ``k``: keep the column groups
+    (stacking arrays would change the edge samples' last bits)."""
     if x.ndim != 2:
         return [savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")
                 for o in orders]
@@ -138,9 +140,8 @@ def _signals(df: pd.DataFrame, robot: LoadedRobot, window: float) -> _Signals:
     # otherwise be differentiated twice through the sole positions)
     quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
     quat_I = quat_I * np.where(quat_I[:, :1] < 0, -1.0, 1.0)
-    gyro_I = df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float)
-    imu = _deriv(np.column_stack([quat_I, gyro_I]), win, 0, dt)  # column by column
-    quat_I, gyro_I = imu[:, :4], np.ascontiguousarray(imu[:, 4:])
+    quat_I = _deriv(quat_I, win, 0, dt)
+    gyro_I = _deriv(df[["imu_gyro_x", "imu_gyro_y", "imu_gyro_z"]].to_numpy(float), win, 0, dt)
     R_WI = quat_to_rotation(quat_I / np.linalg.norm(quat_I, axis=1, keepdims=True))
     qd, qdd = _derivs(q, win, (1, 2), dt)
     return _Signals(t, dt, win, q, qd, qdd, R_WI, gyro_I)
@@ -181,14 +182,24 @@ def _qpos_rows(robot: LoadedRobot, q: np.ndarray, quat: np.ndarray | None) -> np
     """(T, nq) configurations: base at the origin with attitude ``quat`` (identity when
     None), joints ``q``, every other coordinate at ``qpos0``."""
     m = robot.model
-    Q = np.tile(np.asarray(m.qpos0, float), (q.shape[0], 1))
+    Q = np.empty((q.shape[0], m.nq))
+    Q[:] = np.asarray(m.qpos0, float)  # broadcast: no tiled copy
     Q[:, :3] = 0.0
     if quat is None:
         Q[:, 3:7] = (1.0, 0.0, 0.0, 0.0)
     else:
         Q[:, 3:7] = quat
-    Q[:, robot.qpos_adr(robot.joint_names)] = q
+    Q[:, _index(robot.qpos_adr(robot.joint_names))] = q
     return Q
+
+
+def _index(adr) -> slice | np.ndarray:
+    """``adr`` as a slice when it is a contiguous increasing range (a plain copy instead
+    of numpy's gather/scatter), else as it is."""
+    a = np.asarray(adr, np.int64)
+    if a.size and np.array_equal(a, np.arange(a[0], a[0] + a.size)):
+        return slice(int(a[0]), int(a[0]) + a.size)
+    return a
 
 
 def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
@@ -226,6 +237,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, quat_B: np
     sites = np.array([m.site(nm).id for nm in names], np.int64)
     qvel = np.zeros((n, m.nv))
     qacc = np.zeros((n, m.nv))
+    jv = _index(jv)
     qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
     qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
     ground = np.zeros((n, 2, 6))
@@ -291,9 +303,10 @@ def _base_motion(df: pd.DataFrame, robot: LoadedRobot, sig: _Signals, R_WB: np.n
     # (base axes; attitude noise is never differentiated)
     v_loc = np.zeros((n, 3))
     a_loc = np.zeros((n, 3))
-    d1, d2 = _derivs(np.concatenate([p_rel[0], p_rel[1]], axis=1), win, (1, 2), dt)
     for i in range(2):
-        p, pd_, pdd = p_rel[i], d1[:, 3 * i:3 * i + 3], d2[:, 3 * i:3 * i + 3]
+        # one array per foot: the edges' polynomial fit (scipy's lstsq over the columns
+        # at once) rounds differently with more columns
+        p, (pd_, pdd) = p_rel[i], _derivs(p_rel[i], win, (1, 2), dt)
         v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
         a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
                                   + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
@@ -467,19 +480,19 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
 
 def _small_rotations(rv: np.ndarray) -> np.ndarray:
     """(T, 3, 3) rotations of small rotation vectors (T, 3) [rad], first order made
-    orthonormal: the orthonormal polar factor of ``I + [rv]x`` (what its SVD's ``U V^T``
-    gives), in closed form. With ``s = sqrt(1 + |rv|^2)``, ``(I + K)^T (I + K) = s^2 I -
-    rv rv^T``, so the factor is ``(I + K) / s + rv rv^T / (s (s + 1))`` (the rotation by
-    ``atan |rv|`` about ``rv``); equal to the SVD's to about 1e-16."""
-    n = rv.shape[0]
-    s = np.sqrt(1.0 + np.einsum("ti,ti->t", rv, rv))
-    R = np.einsum("ti,tj->tij", rv, rv) / (s * (s + 1.0))[:, None, None]
-    inv = 1.0 / s
-    K = np.zeros((n, 3, 3))
+    orthonormal.
+
+    The SVD stays (2-3 µs per sample): the closed-form polar factor ``(I + K) / s +
+    rv rv^T / (s (s + 1))``, ``s = sqrt(1 + |rv|^2)``, equals it to 6e-15 but moved the
+    virtual wrenches of a 20 s Talos walk by up to 3e-6 N:
+    :func:`~grfguard.rotations.rotation_to_quat` (one square root per component) turns a
+    1e-15 change of a near-identity rotation into about 1e-8 rad of attitude. Replacing
+    the SVD needs that conversion made accurate first (a deliberate output change)."""
+    K = np.zeros((rv.shape[0], 3, 3))
     K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rv[:, 2], rv[:, 1], -rv[:, 0]
     K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rv[:, 2], -rv[:, 1], rv[:, 0]
-    K[:, 0, 0] = K[:, 1, 1] = K[:, 2, 2] = 1.0
-    return R + K * inv[:, None, None]
+    U, _, Vt = np.linalg.svd(np.eye(3) + K)
+    return U @ Vt
 
 
 def _share(w: np.ndarray, alone: np.ndarray, p_r: np.ndarray, p_l: np.ndarray) -> np.ndarray:

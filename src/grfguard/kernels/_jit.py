@@ -10,32 +10,119 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import re
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numba
 
+#: Name of the stamp file kept next to numba's cache files (``__pycache__``): one line per
+#: kernel module, ``<module> <sha256>``, after a header line.
+STAMP_NAME = "grfguard_kernels.stamps"
+_STAMP_HEADER = "# grfguard kernel cache stamps v1"
+_OLD_STAMP_NAME = "grfguard_kernels.sha256"  # the former single hash over all kernels
 
-def _drop_stale_cache() -> None:
+# ``from grfguard.kernels.x import ...``, ``from .x import ...``, ``from . import x``,
+# ``from grfguard.kernels import x``, ``import grfguard.kernels.x`` (anywhere in a file,
+# also inside functions: an import there may still bring compiled callees)
+_FROM = re.compile(r"^[ \t]*from[ \t]+(grfguard\.kernels(?:\.\w+)?|\.\w*)[ \t]+import[ \t]+"
+                   r"(\([^)]*\)|[^\n#]*)", re.M)
+_IMPORT = re.compile(r"^[ \t]*import[ \t]+grfguard\.kernels\.(\w+)", re.M)
+
+
+def kernel_imports(source: str, modules: Iterable[str]) -> set[str]:
+    """The kernel modules (of ``modules``, file stems) that ``source`` imports directly;
+    the package itself is ``__init__``."""
+    known = set(modules)
+    deps: set[str] = set(_IMPORT.findall(source))
+    for mod, names in _FROM.findall(source):
+        sub = mod[len("grfguard.kernels."):] if mod.startswith("grfguard.") else mod[1:]
+        if sub:
+            deps.add(sub)
+            continue
+        deps.add("__init__")  # the package: its own imports, and maybe submodules
+        deps.update(n.split(" as ")[0].strip() for n in names.strip("()").split(","))
+    return deps & known
+
+
+def module_digests(sources: Mapping[str, bytes]) -> dict[str, str]:
+    """Per kernel module (file stem -> source bytes): a hash over its source and those
+    of the kernel modules it imports, transitively (numba inlines compiled callees into
+    the caller's cached machine code, and checks only the caller's file)."""
+    names = sorted(sources)
+    direct = {m: kernel_imports(sources[m].decode("utf-8", "replace"), names) for m in names}
+    out = {}
+    for m in names:
+        seen, todo = {m}, [m]
+        while todo:
+            for d in direct[todo.pop()]:
+                if d not in seen:
+                    seen.add(d)
+                    todo.append(d)
+        h = hashlib.sha256()
+        for d in sorted(seen):
+            h.update(d.encode() + b"\0" + sources[d] + b"\0")
+        out[m] = h.hexdigest()
+    return out
+
+
+def format_stamps(digests: Mapping[str, str]) -> str:
+    """The stamp file's text for ``digests``."""
+    return "\n".join([_STAMP_HEADER, *(f"{m} {digests[m]}" for m in sorted(digests))]) + "\n"
+
+
+def parse_stamps(text: str) -> dict[str, str]:
+    """The digests of a stamp file (empty when it is not one: every module stale)."""
+    lines = text.splitlines()
+    if not lines or lines[0].strip() != _STAMP_HEADER:
+        return {}
+    out = {}
+    for line in lines[1:]:
+        parts = line.split()
+        if len(parts) == 2 and len(parts[1]) == 64:
+            out[parts[0]] = parts[1]
+    return out
+
+
+def stale_cache_files(files: Iterable[str], old: Mapping[str, str],
+                      new: Mapping[str, str]) -> list[str]:
+    """The numba cache files (``<module>.<function>-<line>.py311[.N].nbi/.nbc``) among
+    ``files`` to delete: those of modules whose digest changed or is new, and those of
+    modules that no longer exist."""
+    out = []
+    for f in files:
+        if not f.endswith((".nbi", ".nbc")):
+            continue
+        mod = f.split(".", 1)[0]
+        if mod not in new or old.get(mod) != new[mod]:
+            out.append(f)
+    return sorted(out)
+
+
+def _drop_stale_cache(here: Path | None = None) -> list[str]:
     """numba's cache checks only the file of the compiled function, not the modules it
-    calls (a change in ``nnls.py`` would leave ``vfs.py``'s cached code stale). Keep a hash
-    of every kernel source next to the cache and clear the cache when it changes."""
-    here = Path(__file__).resolve().parent
+    calls (a change in ``nnls.py`` would leave ``vfs.py``'s cached code stale). Keep a
+    hash per kernel module (its source and the kernel modules it imports, transitively)
+    next to the cache and delete the cached code of the modules whose hash changed
+    (others keep theirs: an upgrade that changes one leaf recompiles only what uses it).
+    Returns the names deleted."""
+    here = Path(__file__).resolve().parent if here is None else here
     cache = here / "__pycache__"
-    h = hashlib.sha256()
-    for f in sorted(here.glob("*.py")):
-        h.update(f.name.encode())
-        h.update(f.read_bytes())
-    digest = h.hexdigest()
-    stamp = cache / "grfguard_kernels.sha256"
+    new = module_digests({f.stem: f.read_bytes() for f in sorted(here.glob("*.py"))})
+    stamp = cache / STAMP_NAME
     try:
-        if stamp.exists() and stamp.read_text() == digest:
-            return
-        for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
-            f.unlink()
-        cache.mkdir(exist_ok=True)
-        stamp.write_text(digest)
+        old = parse_stamps(stamp.read_text()) if stamp.exists() else {}
+        files = [f.name for f in cache.iterdir()] if cache.is_dir() else []
+        gone = stale_cache_files(files, old, new)
+        for f in gone:
+            (cache / f).unlink(missing_ok=True)
+        if old != new:
+            cache.mkdir(exist_ok=True)
+            stamp.write_text(format_stamps(new))
+        (cache / _OLD_STAMP_NAME).unlink(missing_ok=True)
     except OSError:  # read-only install: numba caches elsewhere, sources do not change
-        pass
+        return []
+    return gone
 
 
 _drop_stale_cache()

@@ -10,15 +10,15 @@ outputs are bit-identical).
 
 Array layouts (``nch`` channels, ``n`` samples):
 
-* ``X``, ``V``: (nch, n) readings and virtual channels; ``side``: (nch,) 0 right, 1 left;
-  ``sigma``: (nch, 2) scales (stance, swing).
+* ``X``, ``V``: (n, nch) readings and virtual channels (one sample a row); ``side``:
+  (nch,) 0 right, 1 left; ``sigma``: (nch, 2) scales (stance, swing).
 * ``prm``: (``N_PRM``,) settings, indices ``P_*`` (``n_const``, ``n_clear``: the
   constant-reading and clearing lengths in samples, ``inf`` before the rate is known;
   ``dt0``: the period, 0 when unknown).
 * State: ``fst`` (nch, ``N_F``) floats, ``ist`` (nch, ``N_I``) ints, ``exc`` (nch, cap,
   3) the current fault-free CUSUM excursion ``(t, r, v)`` (the onset evidence, at most
   ``max_exc + 1`` entries), ``gate`` (``N_GATE``,) the contact history.
-* Outputs (nch, n): ``flag`` bool, ``kind`` int8 (:data:`KIND_NAMES`), ``fault``,
+* Outputs (n, nch): ``flag`` bool, ``kind`` int8 (:data:`KIND_NAMES`), ``fault``,
   ``rec``, ``onset`` float64.
 """
 
@@ -262,21 +262,21 @@ def _channel(fst, ist, exc, c, t, x, v, ok, loaded, sig, prm):
 @njit_nort
 def channels_sample(k, t, right, left, X, V, side, sigma, prm, fst, ist, exc, gate,
                     flag, kind, fault, rec, onset):
-    """Sample ``k`` of ``X``, ``V`` at time ``t`` with the planned contact of both feet:
-    the gate and every channel advanced, outputs written to column ``k``. Returns the
+    """Sample (row) ``k`` of ``X``, ``V`` at time ``t`` with the planned contact of both
+    feet: the gate and every channel advanced, outputs written to row ``k``. Returns the
     longest excursion kept (samples), for the caller's buffer."""
     ok = gate_step(gate, t, right, left, prm[P_GUARD])
     longest = 0
-    for c in range(X.shape[0]):
+    for c in range(X.shape[1]):
         loaded = right if side[c] == 0 else left
         sig = sigma[c, 0] if loaded else sigma[c, 1]
-        f, kd, fe, rc, on = _channel(fst, ist, exc, c, t, X[c, k], V[c, k], ok, loaded,
+        f, kd, fe, rc, on = _channel(fst, ist, exc, c, t, X[k, c], V[k, c], ok, loaded,
                                      sig, prm)
-        flag[c, k] = f
-        kind[c, k] = kd
-        fault[c, k] = fe
-        rec[c, k] = rc
-        onset[c, k] = on
+        flag[k, c] = f
+        kind[k, c] = kd
+        fault[k, c] = fe
+        rec[k, c] = rc
+        onset[k, c] = on
         longest = max(longest, ist[c, I_EXC])
     return longest
 
@@ -296,9 +296,9 @@ def warm() -> None:
     fst, ist, exc, gate = new_state(1, 2)
     t = np.array([0.0, 0.001])
     c = np.ones(2, np.bool_)
-    X = np.ones((1, 2))
-    outs = (np.zeros((1, 2), np.bool_), np.zeros((1, 2), np.int8), np.zeros((1, 2)),
-            np.zeros((1, 2)), np.zeros((1, 2)))
+    X = np.ones((2, 1))
+    outs = (np.zeros((2, 1), np.bool_), np.zeros((2, 1), np.int8), np.zeros((2, 1)),
+            np.zeros((2, 1)), np.zeros((2, 1)))
     prm = np.ones(N_PRM)
     channels_run(t, c, c, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm, fst, ist, exc,
                  gate, *outs)

@@ -35,11 +35,22 @@ def _taps(flat, row, k0, nb, w, h, sym, a, t):
         w0 = w[win - 1]
         for i in range(nb):
             a[i] = xs[i] * w0
-        for jj in range(-h, h):
+        jj = -h
+        while jj + 3 < h:  # four taps a pass: the same additions, in the same order
+            w1, w2, w3, w4 = w[h + jj], w[h + jj + 1], w[h + jj + 2], w[h + jj + 3]
+            x1 = view1d(flat, row + k0 + jj, nb)
+            x2 = view1d(flat, row + k0 + jj + 1, nb)
+            x3 = view1d(flat, row + k0 + jj + 2, nb)
+            x4 = view1d(flat, row + k0 + jj + 3, nb)
+            for i in range(nb):
+                a[i] = (((a[i] + x1[i] * w1) + x2[i] * w2) + x3[i] * w3) + x4[i] * w4
+            jj += 4
+        while jj < h:
             wj = w[h + jj]
             xs = view1d(flat, row + k0 + jj, nb)
             for i in range(nb):
                 a[i] += xs[i] * wj
+            jj += 1
         return
     xs = view1d(flat, row + k0, nb)
     w0 = w[h]

@@ -43,6 +43,9 @@ from grfguard.kernels.standing import _det_reset
 from grfguard.kernels.vfs import (
     _NJ,
     _S_ANCHOR,
+    _S_HN,
+    _S_PREVF,
+    _S_PREVL_OK,
     _kinematics,
     _scratch_views,
     _unpack,
@@ -396,13 +399,17 @@ def _vibration(yp, ys, ax, ay):
 
 @njit
 def sys_twin_prepare(yp, reset, vstate, qstate, ci):
-    """Before the main sensor's step (after its resync): the twin fully reset at a break;
-    True when the twin may take the main's front of the step this sample (layer on,
-    ``Y_SHARE``, and the twin's front state equal to the main's)."""
+    """Before the main sensor's step (after its resync): the twin resynced at a break as
+    the main (finite differences only: it keeps its filters, attitude, odometry and last
+    output, ``VFSKernel.resync``); True when the twin may take the main's front of the
+    step this sample (layer on, ``Y_SHARE``, and the twin's front state equal to the
+    main's)."""
     if yp[Y_V_ON] == 0.0:
         return False
     if reset:
-        _vfs_reset(qstate)
+        qstate[_S_HN] = 0.0
+        qstate[_S_PREVF] = 0.0
+        qstate[_S_PREVL_OK] = 0.0
     return yp[Y_SHARE] != 0.0 and same_front_state(vstate, qstate, ci)
 
 
@@ -454,7 +461,7 @@ def _zeros_update(yp, ys, ss, x, tot, cref, cest):
         # SwingZeroLearner._in_air: the readings less the zeros so far sum to ~0
         s = 0.0
         for i in range(4 * f, 4 * f + 4):
-            if math.isfinite(x[i]):
+            if math.isfinite(x[i]) and ss[i, FLAG] == 0.0:
                 n = ys[S_ZN + i]
                 s += x[i] - (ys[S_ZSUM + i] / n if n > 0 else 0.0)
         if not abs(s) <= yp[Y_Z_AIR]:
