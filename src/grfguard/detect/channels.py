@@ -459,5 +459,7 @@ class ChannelMonitor:
             exc = np.zeros((m, min(2 * cap, _MAX_EXCURSION + 1), 3))
             exc[:, :cap] = ks["exc"]
             ks["exc"] = exc
-        return [(bool(fl[0, j]), KIND_NAMES[kd[0, j]], float(fe[0, j]), float(rc[0, j]),
-                 float(on[0, j])) for j in range(m)]
+        # one tolist per output (Python bool, int, float), not one numpy scalar a value
+        return [(f, KIND_NAMES[k], e, r, o) for f, k, e, r, o in
+                zip(fl[0].tolist(), kd[0].tolist(), fe[0].tolist(), rc[0].tolist(),
+                    on[0].tolist(), strict=True)]
