@@ -309,6 +309,7 @@ class ChannelMonitor:
         self.dt_s = self._dt_given
         self._t_prev = math.nan
         self._k: dict[str, Any] | None = None  # compiled state, made for the channels
+        self._keys: tuple[list[str], list[str], list[str]] | None = None
 
     def _kernel_state(self, chans: list[str], cap: int) -> dict[str, Any]:
         """Settings, state and one-sample buffers of the compiled step for ``chans``."""
@@ -424,13 +425,13 @@ class ChannelMonitor:
             t = self._t_prev + (self.dt_s or 0.0) if math.isfinite(self._t_prev) else 0.0
         if self.dt_s is None and math.isfinite(self._t_prev) and t > self._t_prev:
             self.dt_s = t - self._t_prev
-        res = self._step(t, contact("r"), contact("l"), [num(c) for c in self.channels],
-                         [num(f"vfs_{c[3:]}") for c in self.channels])
-        out: dict[str, Any] = {}
-        for c, (fl, kd, fe, rc, on) in zip(self.channels, res, strict=True):
-            out[f"flag_{c}"], out[f"kind_{c}"], out[f"fault_est_{c}"] = fl, kd, fe
-            out[f"recovered_{c}"], out[f"onset_est_{c}"] = rc, on
-        return out
+        keys = self._keys
+        if keys is None or keys[0] != self.channels:  # names built once, not per sample
+            keys = self._keys = (list(self.channels), [f"vfs_{c[3:]}" for c in self.channels],
+                                 [f"{nm}_{c}" for c in self.channels for nm in _OUT_NAMES])
+        res = self._step(t, contact("r"), contact("l"), [num(c) for c in keys[0]],
+                         [num(v) for v in keys[1]])
+        return dict(zip(keys[2], (o for r in res for o in r), strict=True))
 
     def _step(self, t: float, cr: bool, cl: bool, xs: list[float],
               vs: list[float]) -> list[tuple[bool, str, float, float, float]]:
