@@ -24,8 +24,13 @@ CPU times are the fair figure on a shared machine; the wall time is what a user 
 on an otherwise idle core. Prints markdown and rewrites the section
 ``## grfguard run end to end (issue 11)`` of BENCHMARKS.md unless ``--no-write``.
 
+With ``--check`` the command's output is compared with ``write_log(Monitor.run(log))``
+(the output-frame path the block writer replaces), column by column, bit for bit. The
+runs may write Python bytecode (``PYTHONDONTWRITEBYTECODE`` unset for them, as after a
+pip install).
+
 Usage: ``.venv/bin/python benchmarks/bench_run_cli.py [--duration 600] [--log walk.parquet]
-[--repeat 3] [--no-taskset] [--no-write]``
+[--repeat 3] [--no-taskset] [--no-write] [--check]``
 """
 
 from __future__ import annotations
@@ -44,6 +49,33 @@ from pathlib import Path
 from _common import update_section
 
 SECTION = "## grfguard run end to end (issue 11)"
+#: The runs' environment: Python may write the bytecode of grfguard's own modules (as a
+#: pip install does; a shell with PYTHONDONTWRITEBYTECODE=1 would otherwise recompile
+#: them in every process, about 0.1 s).
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+CHECK_CODE = r"""
+import sys
+import numpy as np, pyarrow as pa, pyarrow.parquet as pq
+from grfguard.io.logio import read_log, write_log
+from grfguard.pipeline import Monitor
+log = read_log(sys.argv[1], copy=False)
+write_log(Monitor.for_log(log).run(log), sys.argv[3])  # the frame path
+a, b = pq.read_table(sys.argv[2]), pq.read_table(sys.argv[3])
+def same(x, y):
+    x, y = x.combine_chunks(), y.combine_chunks()
+    if x.type != y.type or x.null_count != y.null_count or not x.is_null().equals(y.is_null()):
+        return False
+    if pa.types.is_floating(x.type):
+        return np.array_equal(x.fill_null(0.0).to_numpy().view(np.int64),
+                              y.fill_null(0.0).to_numpy().view(np.int64))
+    return x.equals(y)
+bad = [c for c in b.column_names if not same(a[c], b[c])]
+meta = a.schema.metadata == b.schema.metadata
+print(f"{len(b.column_names)} columns, {b.num_rows} rows: schema "
+      f"{'equal' if a.schema.equals(b.schema) else 'DIFFERENT'}, metadata "
+      f"{'equal' if meta else 'DIFFERENT'}, columns differing bit for bit: {bad or 'none'}")
+"""
 BIN = Path(sys.executable).parent
 
 PHASE_CODE = r"""
@@ -93,7 +125,7 @@ def _prefix(no_taskset: bool) -> list[str]:
 def _command(log: Path, out: Path, prefix: list[str]) -> dict[str, float]:
     cmd = [*prefix, str(BIN / "grfguard"), "run", str(log), "-o", str(out)]
     t = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=ENV)
     _, status, ru = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t
     err = proc.stderr.read().decode() if proc.stderr else ""
@@ -104,7 +136,7 @@ def _command(log: Path, out: Path, prefix: list[str]) -> dict[str, float]:
 
 def _phases(log: Path, out: Path, prefix: list[str]) -> dict[str, float]:
     res = subprocess.run([*prefix, sys.executable, "-c", PHASE_CODE, str(log), str(out)],
-                         capture_output=True, text=True, check=True)
+                         capture_output=True, text=True, check=True, env=ENV)
     data = json.loads(res.stdout.strip().splitlines()[-1])
     marks = data["marks"]
     ph: dict[str, float] = {}
@@ -179,6 +211,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-taskset", action="store_true")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--check", action="store_true",
+                    help="Also compare the command's output with write_log(Monitor.run(log)) "
+                    "(the output-frame path), column by column, bit for bit.")
     args = ap.parse_args()
     prefix = _prefix(args.no_taskset)
     load = _load()
@@ -197,13 +232,19 @@ def main() -> None:
         ph = {k: min(p[k] for p in phases) for k in phases[0]}
         size_in, size_out = log.stat().st_size / 1e6, out.stat().st_size / 1e6
         fmt = _parquet_options(out)
+        check = ""
+        if args.check:
+            check = subprocess.run([sys.executable, "-c", CHECK_CODE, str(log), str(out),
+                                    str(Path(tmp) / "frame.parquet")], capture_output=True,
+                                   text=True, check=True, env=ENV).stdout.strip()
     n = int(ph["n"])
     core = "taskset -c 1, " if prefix else ""
     lines = [
         SECTION,
         "",
         f"Command: `.venv/bin/python benchmarks/bench_run_cli.py --duration {args.duration:g} "
-        f"--repeat {args.repeat}` ({platform.machine()}, {os.cpu_count()} cores, "
+        f"--repeat {args.repeat}{' --check' if args.check else ''}` ({platform.machine()}, "
+        f"{os.cpu_count()} cores, "
         f"{core}Python {platform.python_version()}{load} at the start). The log: "
         f"`grfguard simulate --duration {args.duration:g}` ({n} samples, {size_in:.0f} MB); "
         f"the output {size_out:.0f} MB.",
@@ -230,6 +271,9 @@ def main() -> None:
     ]
     for name, w, r, mb in fmt:
         lines.append(f"| {name} | {w:.2f} | {r:.2f} | {mb:.0f} |")
+    if check:
+        lines += ["", "Output of the command against `write_log(Monitor.run(log))` (the "
+                  f"output-frame path, `--check`): {check}."]
     text = "\n".join(lines) + "\n"
     print(text)
     if not args.no_write:
