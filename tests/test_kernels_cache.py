@@ -90,6 +90,26 @@ def test_a_change_reaches_exactly_its_importers(changed: str, affected: set[str]
     assert module_digests(src) == before  # deterministic
 
 
+def test_constants_frozen_from_outside_modules_reach_their_kernels() -> None:
+    """numba freezes module-level constants a kernel imports from outside the kernels
+    (``io.schema`` column indices, ``model.robot.SENSOR_NAMES``) into its machine code:
+    a change of such a module must invalidate the kernels importing it at top level,
+    and only those."""
+    assert kernel_imports("from grfguard.io.schema import FORCE_COLUMNS\n",
+                          ["grfguard.io.schema"]) == {"grfguard.io.schema"}
+    # a function-level import runs in Python: nothing frozen, no dependency
+    assert kernel_imports("def f():\n    from grfguard.io.schema import T\n",
+                          ["grfguard.io.schema"]) == set()
+    src = _jit.kernel_sources(KERNELS)
+    assert {"grfguard.io.schema", "grfguard.model.robot"} <= set(src)
+    assert src["grfguard.io.schema"] == (KERNELS.parent / "io" / "schema.py").read_bytes()
+    before = module_digests(src)
+    after = module_digests({**src, "grfguard.io.schema": src["grfguard.io.schema"] + b"#\n"})
+    moved = {m for m in src if before[m] != after[m] and "." not in m}
+    assert {"vfs", "monitor", "system"} <= moved
+    assert not moved & {"fk", "rne", "nnls", "standing", "detect"}
+
+
 def test_digests_of_an_import_cycle_terminate() -> None:
     a = b"from .b import g\n"
     b = b"from .a import f\n"
@@ -182,4 +202,4 @@ def test_real_cache_file_names_carry_their_module() -> None:
     assert {f.split(".", 1)[0] for f in files} <= mods
     assert {"vfs", "monitor"} <= {f.split(".", 1)[0] for f in files}
     stamps = parse_stamps((cache / STAMP_NAME).read_text())
-    assert stamps == module_digests(_sources())
+    assert stamps == module_digests(_jit.kernel_sources(KERNELS))

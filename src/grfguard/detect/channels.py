@@ -363,8 +363,8 @@ class ChannelMonitor:
         V = np.ascontiguousarray(log[[f"vfs_{c[3:]}" for c in chans]].to_numpy(float)
                                  ).reshape(n, m)
         ks = self._k = self._kernel_state(chans, min(n, _MAX_EXCURSION + 1))
-        outs = (np.zeros((n, m), bool), np.zeros((n, m), np.int8), np.zeros((n, m)),
-                np.zeros((n, m)), np.zeros((n, m)))
+        outs = (np.empty((n, m), bool), np.empty((n, m), np.int8), np.empty((n, m)),
+                np.empty((n, m)), np.empty((n, m)))  # every element written
         channels_run(t, np.ascontiguousarray(cr), np.ascontiguousarray(cl), X, V, ks["side"],
                      ks["sigma"], ks["prm"], ks["fst"], ks["ist"], ks["exc"], ks["gate"],
                      *outs)

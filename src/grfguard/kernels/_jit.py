@@ -28,13 +28,19 @@ _OLD_STAMP_NAME = "grfguard_kernels.sha256"  # the former single hash over all k
 _FROM = re.compile(r"^[ \t]*from[ \t]+(grfguard\.kernels(?:\.\w+)?|\.\w*)[ \t]+import[ \t]+"
                    r"(\([^)]*\)|[^\n#]*)", re.M)
 _IMPORT = re.compile(r"^[ \t]*import[ \t]+grfguard\.kernels\.(\w+)", re.M)
+# ``from grfguard.io.schema import ...`` and other grfguard modules outside the kernels:
+# numba freezes the module-level constants a kernel reads (column indices, sensor names)
+# into its machine code, so the source of such a module is part of the kernel's hash
+# (top-level imports only: a function-level import runs in Python, nothing is frozen)
+_OUTSIDE = re.compile(r"^from[ \t]+(grfguard\.(?!kernels\b)[\w.]+)[ \t]+import", re.M)
 
 
 def kernel_imports(source: str, modules: Iterable[str]) -> set[str]:
     """The kernel modules (of ``modules``, file stems) that ``source`` imports directly;
-    the package itself is ``__init__``."""
+    the package itself is ``__init__``. Modules of grfguard outside the kernels count by
+    their dotted name (``grfguard.io.schema``) when ``modules`` lists them."""
     known = set(modules)
-    deps: set[str] = set(_IMPORT.findall(source))
+    deps: set[str] = set(_IMPORT.findall(source)) | set(_OUTSIDE.findall(source))
     for mod, names in _FROM.findall(source):
         sub = mod[len("grfguard.kernels."):] if mod.startswith("grfguard.") else mod[1:]
         if sub:
@@ -99,16 +105,34 @@ def stale_cache_files(files: Iterable[str], old: Mapping[str, str],
     return sorted(out)
 
 
+def kernel_sources(here: Path) -> dict[str, bytes]:
+    """Sources to hash: every kernel module (file stem -> bytes) and every grfguard module
+    outside the kernels that one of them imports from (dotted name -> bytes; its constants
+    are frozen into the compiled code). Outside modules that are not files of the package
+    next to ``here`` (a fake package in tests) are left out."""
+    out = {f.stem: f.read_bytes() for f in sorted(here.glob("*.py"))}
+    root = here.parent
+    for src in list(out.values()):
+        for mod in _OUTSIDE.findall(src.decode("utf-8", "replace")):
+            rel = Path(*mod.split(".")[1:])
+            for f in (root / rel.with_suffix(".py"), root / rel / "__init__.py"):
+                if mod not in out and f.is_file():
+                    out[mod] = f.read_bytes()
+    return out
+
+
 def _drop_stale_cache(here: Path | None = None) -> list[str]:
     """numba's cache checks only the file of the compiled function, not the modules it
     calls (a change in ``nnls.py`` would leave ``vfs.py``'s cached code stale). Keep a
     hash per kernel module (its source and the kernel modules it imports, transitively)
     next to the cache and delete the cached code of the modules whose hash changed
     (others keep theirs: an upgrade that changes one leaf recompiles only what uses it).
+    A grfguard module outside the kernels whose constants a kernel imports counts as a
+    dependency of that kernel.
     Returns the names deleted."""
     here = Path(__file__).resolve().parent if here is None else here
     cache = here / "__pycache__"
-    new = module_digests({f.stem: f.read_bytes() for f in sorted(here.glob("*.py"))})
+    new = module_digests(kernel_sources(here))
     stamp = cache / STAMP_NAME
     try:
         old = parse_stamps(stamp.read_text()) if stamp.exists() else {}

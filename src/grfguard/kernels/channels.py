@@ -62,10 +62,12 @@ def new_state(nch: int, cap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     fst[:, F_ALARM] = np.nan
     gate = np.zeros(N_GATE)
     gate[G_START] = np.nan
-    return fst, np.zeros((nch, N_I), np.int64), np.zeros((nch, max(cap, 1), 3)), gate
+    # the excursion buffer is only read below its length: left uninitialised (a batch
+    # over a long log asks for megabytes)
+    return fst, np.zeros((nch, N_I), np.int64), np.empty((nch, max(cap, 1), 3)), gate
 
 
-@njit_nort
+@njit_nort(inline="always")
 def gate_step(gate, t, right, left, guard):
     """One sample of the causal contact gate (the former ``ContactPhases.step``): whether
     the channel tests are valid at ``t``."""
@@ -100,7 +102,7 @@ def gate_run(gate, t, right, left, guard, ok):
         ok[k] = gate_step(gate, t[k], right[k], left[k], guard)
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _cusum(fst, c, z, kappa):
     gp = fst[c, F_GP] + z - kappa
     gn = fst[c, F_GN] - z - kappa
@@ -108,7 +110,7 @@ def _cusum(fst, c, z, kappa):
     fst[c, F_GN] = gn if gn > 0.0 else 0.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _add(fst, c, t, r, v):
     """One valid sample into the fit sums (the former ``_Channel.add``)."""
     tau = t - fst[c, F_ONSET]
@@ -121,7 +123,7 @@ def _add(fst, c, t, r, v):
     fst[c, F_SRR] += r * r
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _clear_flag(fst, ist, c):
     ist[c, I_FLAG] = 0
     ist[c, I_FROZEN] = 0
@@ -134,7 +136,7 @@ def _clear_flag(fst, ist, c):
     fst[c, F_SRR] = 0.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _unflagged_cusum(fst, ist, exc, c, t, r, v, sig, prm):
     """CUSUM on a valid sample of an unflagged channel, keeping the excursion since the
     sum last left zero; raises the flag with the excursion as its first evidence."""
@@ -165,7 +167,7 @@ def _unflagged_cusum(fst, ist, exc, c, t, r, v, sig, prm):
         ist[c, I_EXC] = m - half
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _flagged(fst, ist, c, t, r, v, sig, ok, loaded, const, valid, prm):
     """A flagged channel: frozen test, CUSUM and quiet count; True when the flag clears."""
     kappa = prm[P_KAPPA]
@@ -201,7 +203,7 @@ def _flagged(fst, ist, c, t, r, v, sig, ok, loaded, const, valid, prm):
     return False
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _best_fit(fst, c):
     """Kind with the least squared error among offset, drift and gain, and ``(b, a, g)``
     (ties: the first of offset, drift, gain, as Python's ``min``)."""
@@ -220,7 +222,7 @@ def _best_fit(fst, c):
     return kind, b, a, 1.0 + g1
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _channel(fst, ist, exc, c, t, x, v, ok, loaded, sig, prm):
     """One channel, one sample: ``(flag, kind, fault, recovered, onset)``."""
     if math.isfinite(x) and x == fst[c, F_LAST_X]:
@@ -259,7 +261,7 @@ def _channel(fst, ist, exc, c, t, x, v, ok, loaded, sig, prm):
     return True, kind, fault, x - fault, fst[c, F_ONSET]
 
 
-@njit_nort
+@njit_nort(inline="always")
 def channels_sample(k, t, right, left, X, V, side, sigma, prm, fst, ist, exc, gate,
                     flag, kind, fault, rec, onset):
     """Sample (row) ``k`` of ``X``, ``V`` at time ``t`` with the planned contact of both
