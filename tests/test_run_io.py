@@ -170,3 +170,27 @@ def test_block_writer_leaves_the_python_stages_to_the_frame_path(bad_walk, tmp_p
     assert not out.exists()
     n = run_log(path, out, compiled=False)  # the frame path of the command
     assert n == len(read_log(out)) == len(log)
+
+
+def test_console_script_run_ends_cleanly(bad_walk, tmp_path) -> None:
+    """The console script ends a completed ``run`` without the interpreter's teardown:
+    exit code 0, its message printed, the output complete; an error still exits 2."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path, _ = bad_walk
+    out = tmp_path / "cli.parquet"
+    exe = Path(sys.executable).parent / "grfguard"
+    res = subprocess.run([str(exe), "run", str(path), "-o", str(out)], capture_output=True,
+                         text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    said = res.stdout + res.stderr
+    assert f"wrote {out}" in said.replace("\n", "") and "samples" in said
+    ref = tmp_path / "ref.parquet"
+    run_log(path, ref)
+    assert pq.read_table(out).equals(pq.read_table(ref))
+    bad = subprocess.run([str(exe), "run", str(tmp_path / "missing.parquet"), "-o",
+                          str(tmp_path / "x.parquet")], capture_output=True, text=True,
+                         timeout=600)
+    assert bad.returncode == 2 and "does not exist" in bad.stdout + bad.stderr
