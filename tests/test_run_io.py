@@ -194,3 +194,21 @@ def test_console_script_run_ends_cleanly(bad_walk, tmp_path) -> None:
                           str(tmp_path / "x.parquet")], capture_output=True, text=True,
                          timeout=600)
     assert bad.returncode == 2 and "does not exist" in bad.stdout + bad.stderr
+
+
+def test_for_log_warm_false_leaves_the_kernels_to_their_first_call(bad_walk,
+                                                                    monkeypatch) -> None:
+    """``grfguard run`` builds its monitor with ``warm=False``: no ``warm_up()`` (every
+    streaming kernel), only the loop it runs is loaded, by ``write_run``."""
+    import grfguard.kernels as kernels
+
+    path, _ = bad_walk
+    log = read_log(path, copy=False)
+    calls: list[int] = []
+    monkeypatch.setattr(kernels, "warm_up", lambda: calls.append(1) or 0.0)
+    cold = Monitor.for_log(log, warm=False)
+    assert calls == []
+    Monitor.for_log(log)  # the default warms up
+    assert calls == [1]
+    out = cold.run(log)
+    assert len(out) == len(log) and "system_state" in out
