@@ -69,7 +69,7 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
 
     Args:
         df: The log.
-        path: Destination; ``.csv`` writes CSV, anything else Parquet (LZ4).
+        path: Destination; ``.csv`` writes CSV, anything else Parquet (zstd).
 
     Returns:
         The path written.
@@ -105,12 +105,12 @@ def write_log(df: pd.DataFrame, path: str | Path) -> Path:
     return path
 
 
-#: Parquet compression of written logs: LZ4 (pyarrow's ``lz4``, Parquet's LZ4_RAW codec). On
-#: byte-stream-split sensor data it is within 2 % of zstd's size, takes about a third
-#: less CPU time to write than zstd level 1 and reads faster (BENCHMARKS.md "grfguard
-#: run end to end (issue 11)").
-PARQUET_COMPRESSION = "lz4"
-PARQUET_COMPRESSION_LEVEL = None
+#: Parquet compression of written logs: zstd level 1. LZ4 (Parquet's LZ4_RAW codec) writes
+#: a 10-minute output about 0.4 s faster for 2 % more bytes (BENCHMARKS.md "grfguard run
+#: end to end (issue 11)"), but LZ4_RAW is a 2021 addition to the format that older
+#: readers (Spark < 3.3, older DuckDB and fastparquet) cannot open: logs are for any tool.
+PARQUET_COMPRESSION = "zstd"
+PARQUET_COMPRESSION_LEVEL = 1
 #: Rows per Parquet row group (a 10-minute 1 kHz log is one group).
 PARQUET_ROW_GROUP = 1 << 20
 

@@ -127,5 +127,8 @@ def savgol_many(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float,
 
 
 def warm() -> None:
-    """Compile (or load) the kernel on a tiny input."""
-    savgol_many(np.zeros((7, 2)), 5, (0, 1, 2), 0.001)
+    """Compile (or load) the kernel on a tiny input, with the argument types of
+    :func:`savgol_many`'s call but without importing ``scipy.signal`` (about 1 s of start-up
+    that :func:`grfguard.kernels.warm_up`, run by every ``Monitor.for_log``, would pay)."""
+    savgol_block(np.zeros((2, 7)), np.zeros((3, 5)), np.zeros(3, np.int64),
+                 np.empty((3, 2, 7)))
