@@ -44,7 +44,7 @@ def test_butter_refuses_what_scipy_refuses() -> None:
 def test_monitor_import_does_not_load_scipy_signal() -> None:
     code = ("import sys, grfguard.cli, grfguard.pipeline, grfguard.estimate.vfs, "
             "grfguard.kernels.vfs; from grfguard.estimate.vfs import VirtualForceSensor; "
-            "VirtualForceSensor(); "
+            "from grfguard.model.robot import SURALP; VirtualForceSensor(SURALP); "
             "print(sorted(m for m in ('scipy.signal', 'matplotlib', 'plotly') "
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -12,7 +12,7 @@ from grfguard.detect.monitor import METHODS, Monitor, MonitorConfig
 from grfguard.detect.thresholds import Thresholds, default_thresholds
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.faults import inject_faults
-from grfguard.model.robot import SENSOR_NAMES
+from grfguard.model.robot import SENSOR_NAMES, SURALP
 
 OUT_COLS = [f"{p}_{s}" for s in SENSOR_NAMES for p in ("flag", "kind", "eta", "recovered")]
 
@@ -140,7 +140,7 @@ def test_config_round_trip_and_errors(tmp_path) -> None:
 
 def test_run_needs_forces() -> None:
     with pytest.raises(LogFormatError, match="force_r1"):
-        Monitor(MonitorConfig(), None).run(pd.DataFrame({"time": [0.0, 0.001]}))
+        Monitor(MonitorConfig(), None, robot=SURALP).run(pd.DataFrame({"time": [0.0, 0.001]}))
 
 
 def test_calibrate_thresholds_from_fault_free_logs(short_log: pd.DataFrame) -> None:

@@ -16,6 +16,7 @@ from grfguard.errors import ConfigError
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS, VFSConfig, VirtualForceSensor
 from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.kernels import CompiledVirtualForceSensor
+from grfguard.model.robot import SURALP
 from grfguard.sim import GaitConfig, NoiseConfig, simulate
 from reference.vfs_stages import PythonVFS
 
@@ -37,12 +38,12 @@ def _max_diff(a: pd.DataFrame, b: pd.DataFrame, cols: list[str]) -> float:
 
 def test_one_class_two_engines() -> None:
     assert CompiledVirtualForceSensor is VirtualForceSensor
-    assert VirtualForceSensor().compiled
+    assert VirtualForceSensor(SURALP).compiled
     with pytest.raises(ConfigError, match="tests/reference/vfs_stages.py"):
         VirtualForceSensor(compiled=False)
     # every setting runs compiled (kernels/vfs_paper.py: the paper's, the Kalman ZMP...)
-    assert VirtualForceSensor(config=VFSConfig.paper()).compiled
-    assert VirtualForceSensor(config=VFSConfig(zmp_filter="kalman")).compiled
+    assert VirtualForceSensor(SURALP, VFSConfig.paper()).compiled
+    assert VirtualForceSensor(SURALP, VFSConfig(zmp_filter="kalman")).compiled
 
 
 def test_compiled_equals_python_stages_on_paper_scenario(paper_log) -> None:

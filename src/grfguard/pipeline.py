@@ -54,7 +54,7 @@ from grfguard.detect.system import (
     swing_load_to_stance,
 )
 from grfguard.detect.tuning import DetectTuning
-from grfguard.errors import LogFormatError
+from grfguard.errors import ConfigError, LogFormatError
 from grfguard.guard import Continuity, GuardConfig, InputGuard, TimeGuard
 from grfguard.io.schema import (
     IMU_ACC,
@@ -103,58 +103,20 @@ def _f(row: Mapping[str, Any], key: str) -> float:
         return _NAN
 
 
-def _robot_by_mass(log: pd.DataFrame) -> RobotConfig | None:
-    """A robot with the log's mass (``attrs["robot"]["mass"]`` or ``["nominal"]["mass"]``)
-    for the physical ranges, or None when none is found."""
-    r = (getattr(log, "attrs", {}) or {}).get("robot")
-    for d in (r, r.get("nominal") if isinstance(r, Mapping) else None):
-        if isinstance(d, Mapping):
-            try:
-                m = float(d["mass"])
-            except (KeyError, TypeError, ValueError):
-                continue
-            if math.isfinite(m) and m > 0:
-                return RobotConfig(mass=m)
-    return None
-
-
 def _log_robot(log: pd.DataFrame, vfs: Any, robot: Any) -> RobotConfig:
     """The robot whose weight and sole the monitor's guards, common-mode fit, swing-zero
-    learner and standing layer use: ``robot`` (a ``RobotConfig``, or a described robot:
-    ``LoadedRobot``, shipped name, TOML path); a described robot named by the log (its own
-    mass and sole, :func:`grfguard.estimate.described.monitor_robot`); the log's
-    ``RobotConfig`` (``attrs["robot"]``); the virtual sensor's robot. Never a stand-in.
+    learner and standing layer use: ``robot`` or the log's metadata through
+    :func:`grfguard.estimate.described.log_robot` (the one resolver); the virtual
+    sensor's robot when the log names none. Never a stand-in.
 
     Raises:
         LogFormatError: The log gives no way to know the robot.
     """
-    from grfguard.calib.selfcal import robot_of
-    from grfguard.estimate.described import is_described, monitor_robot
+    from grfguard.estimate.described import log_robot, names_robot
 
-    if isinstance(robot, RobotConfig):
-        return robot
-    attrs = getattr(log, "attrs", {}) or {}
-    if robot is not None or is_described(log) or isinstance(attrs.get("robot_name"), str):
-        return monitor_robot(log, robot)
-    named = attrs.get("robot")
-    if isinstance(named, str) and not named.lstrip().startswith("{"):  # a robot's name
-        return monitor_robot(log, named)
-    if named is not None:
-        try:
-            return robot_of(log)
-        except Exception:  # noqa: BLE001 - not SURALP-shaped parameters: a mass at least
-            found = _robot_by_mass(log)
-            if found is not None:
-                return found
-    if getattr(vfs, "robot", None) is not None:
+    if robot is None and not names_robot(log) and getattr(vfs, "robot", None) is not None:
         return vfs.robot
-    raise LogFormatError(
-        "Monitor.for_log: the log names no robot (log.attrs['robot'] and "
-        "attrs['robot_name'] are missing or not understood: "
-        f"{attrs.get('robot')!r:.80}); the monitor's guards, common-mode fit, swing zeros "
-        "and standing layer need the robot's weight and sole. Set log.attrs['robot'] = "
-        "RobotConfig(...).to_dict() (or attrs['robot_name'] = 'g1', 'talos' or a robot "
-        "TOML), pass Monitor.for_log(log, robot=...), or use the CLI's --robot")
+    return log_robot(log, robot, where="Monitor.for_log")
 
 
 def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
@@ -248,8 +210,8 @@ class Monitor:
         detect_tuning: Design constants of the default detector.
         recover_tuning: Design constants of the recovery.
         guard: Settings of the input and time guards.
-        robot: Robot description for the physical ranges (default: the VFS's robot, or
-            SURALP).
+        robot: Robot description for the physical ranges (default: the VFS's robot;
+            required when ``vfs`` is None: :meth:`for_log` reads it from the log).
         common_mode: Settings of the system-level layer (:mod:`grfguard.detect.system`:
             common-mode fit and ``model_mismatch``, load-cell zero, gyro bias and IMU tilt
             learners, accelerometer vibration switch; True, the default: default
@@ -283,7 +245,14 @@ class Monitor:
         self._kernels_for: Any = _UNSET
         self.guard = guard if guard is not None else GuardConfig()
         if robot is None:
-            robot = getattr(vfs, "robot", None) or RobotConfig()
+            robot = getattr(vfs, "robot", None)
+        if robot is None:
+            raise ConfigError(
+                "Monitor: no robot (robot=None and no virtual sensor, vfs=None): its weight "
+                "and sole set the input guards, the common-mode fit and the standing layer, "
+                "and grfguard never guesses them; pass robot= (a RobotConfig, e.g. "
+                "grfguard.model.robot.load_robot('ROBOT.toml') or grfguard.SURALP) or vfs=, "
+                "or build the monitor with Monitor.for_log(log) (the log's own robot)")
         self.robot = robot
         self.detector = Detector(self.config, detect_tuning)
         self.paper = PaperDetector(self.config)

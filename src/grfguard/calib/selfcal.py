@@ -254,18 +254,41 @@ class ModelCorrections:
 
 
 # ---------------------------------------------------------------------- helpers
-def robot_of(log: pd.DataFrame) -> RobotConfig:
-    """The robot description of a log (``attrs["robot"]``, SURALP when absent)."""
-    r = (getattr(log, "attrs", {}) or {}).get("robot")
-    if r is None:
-        return RobotConfig()
-    if isinstance(r, RobotConfig):
-        return r
-    if isinstance(r, str):
-        import json
+def robot_of(log: pd.DataFrame, robot: Any = None) -> RobotConfig:
+    """The robot of a log: ``robot`` when given, else its metadata (``attrs["robot"]``, or
+    a described robot's ``robot_name``: its own mass and sole), through
+    :func:`grfguard.estimate.described.log_robot`, the resolver
+    :meth:`~grfguard.pipeline.Monitor.for_log` uses. Never a stand-in.
 
-        r = json.loads(r)
-    return RobotConfig.from_dict(dict(r))
+    Raises:
+        LogFormatError: The log has no robot metadata (how to give one in the message).
+    """
+    from grfguard.estimate.described import log_robot
+
+    return log_robot(log, robot, where="grfguard.calib.robot_of")
+
+
+def _leg_model_robot(log: pd.DataFrame) -> RobotConfig:
+    """The ``RobotConfig`` robot of a log for the self-calibration, which fits its
+    12-joint leg model (``q_<joint>`` of :data:`~grfguard.model.robot.JOINT_NAMES`).
+
+    Raises:
+        LogFormatError: The log has no robot metadata, or names a robot described by its
+            model file (Talos, G1, a user TOML), whose legs this fit does not model.
+    """
+    from grfguard.estimate.described import is_described
+
+    attrs = getattr(log, "attrs", {}) or {}
+    name = attrs.get("robot_name")
+    if name is None and isinstance(attrs.get("robot"), str):
+        name = None if attrs["robot"].lstrip().startswith("{") else attrs["robot"]
+    if is_described(log) or name is not None:
+        raise LogFormatError(
+            f"estimate_corrections: the log's robot {name!r} is described by its model "
+            "file (URDF/MJCF); the model self-calibration fits the 12-joint leg model of a "
+            "RobotConfig robot (grfguard robot show) only. Calibrate this robot's "
+            "thresholds without --model (grfguard calibrate LOGS -o FILE)")
+    return robot_of(log)
 
 
 def _arr(log: pd.DataFrame, cols: Sequence[str]) -> np.ndarray:
@@ -350,7 +373,7 @@ def estimate_corrections(
     frames = [logs] if isinstance(logs, pd.DataFrame) else list(logs)
     if not frames:
         raise LogFormatError("estimate_corrections needs at least one fault-free log")
-    robot = robot_of(frames[0])
+    robot = _leg_model_robot(frames[0])
     data = [_load(df) for df in frames]
     sigma: dict[str, float] = {}
     zero = _fit_zeros(data, sigma)

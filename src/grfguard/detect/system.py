@@ -896,7 +896,7 @@ class SystemAwareMonitor:
             raise ConfigError("SystemAwareMonitor: no robot description; pass robot= (a "
                               "grfguard.model.robot.RobotConfig, e.g. from "
                               "grfguard.model.robot.load_robot) or a virtual sensor")
-        self.inner = Monitor(self.config, vfs=None)
+        self.inner = Monitor(self.config, vfs=None, robot=robot)
         self.common = CommonModeMonitor(robot, self.config.dt_s, common)
         self.standing = StandingDetector(self.config.dt_s, standing, weight_n=robot.weight)
         self._last_flags = [False] * len(SENSOR_NAMES)

@@ -35,7 +35,9 @@ __all__ = [
     "described_thresholds",
     "ft_channel_calibration",
     "is_described",
+    "log_robot",
     "monitor_robot",
+    "names_robot",
     "run_described",
     "with_described_vfs",
 ]
@@ -109,6 +111,95 @@ def monitor_robot(df: pd.DataFrame, robot: Any = None) -> Any:
             f"{shape[1]}); give both feet the same sole in the robot TOML")
     return RobotConfig(name=desc.name, mass=float(mass), foot_length=fr.length,
                        foot_width=fr.width, sensor_inset=fr.corner_inset)
+
+
+def names_robot(df: pd.DataFrame) -> bool:
+    """True when ``df``'s metadata names a robot at all (``attrs["robot"]`` or
+    ``attrs["robot_name"]``), whether or not it can be read."""
+    attrs = getattr(df, "attrs", {}) or {}
+    return attrs.get("robot") is not None or isinstance(attrs.get("robot_name"), str)
+
+
+def log_robot(df: pd.DataFrame, robot: Any = None, where: str = "the log") -> Any:
+    """The robot of a log as a :class:`~grfguard.model.robot.RobotConfig`: the one
+    resolver of :meth:`grfguard.pipeline.Monitor.for_log`,
+    :func:`grfguard.calib.robot_of` and the system-aware monitor. Never a stand-in.
+
+    In order: ``robot`` when it is a ``RobotConfig``; a described robot (``robot`` a
+    ``LoadedRobot``, shipped name or TOML path, or a log whose metadata names one:
+    ``robot_name``, or ``attrs["robot"]`` holding a name) through
+    :func:`monitor_robot` (its own mass and sole; the leg fields are not meant); a
+    described robot's dict in ``attrs["robot"]`` (its sole and mass); the log's
+    ``RobotConfig`` parameters (``attrs["robot"]``, a dict or JSON).
+
+    Args:
+        df: A log.
+        robot: None (the log's metadata), a ``RobotConfig``, or a described robot.
+        where: Who asks (named in the error).
+
+    Raises:
+        LogFormatError: The log names no robot (how to give one in the message), or its
+            ``attrs["robot"]`` is not a robot description.
+    """
+    from collections.abc import Mapping
+
+    from grfguard.estimate.vfs import _robot_from_attrs
+    from grfguard.model.robot import RobotConfig
+
+    if isinstance(robot, RobotConfig):
+        return robot
+    attrs = getattr(df, "attrs", {}) or {}
+    named = attrs.get("robot")
+    if robot is not None or is_described(df) or isinstance(attrs.get("robot_name"), str):
+        return monitor_robot(df, robot)
+    if isinstance(named, str) and not named.lstrip().startswith("{"):  # a robot's name
+        return monitor_robot(df, named)
+    if isinstance(named, Mapping) and isinstance(named.get("feet"), Mapping):
+        return _robot_of_description_dict(df, named)
+    if named is None:
+        raise LogFormatError(
+            f"{where}: the log names no robot (no robot metadata: log.attrs['robot'] and "
+            "attrs['robot_name'] are missing), and grfguard never guesses it (the robot's "
+            "weight and sole set the guards, the fits and the virtual sensor). Logs written "
+            "by grfguard simulate / import carry it; otherwise pass robot=... (e.g. "
+            "grfguard.model.robot.load_robot('ROBOT.toml'), or 'g1', 'talos'), set "
+            "log.attrs['robot'] = RobotConfig(...).to_dict() (or attrs['robot_name'] = "
+            "'g1'), or on the command line pass --robot ROBOT.toml or --robot NAME")
+    return _robot_from_attrs(attrs)
+
+
+def _robot_of_description_dict(df: pd.DataFrame, d: Any) -> Any:
+    """The monitor's ``RobotConfig`` from a described robot's dict
+    (:meth:`~grfguard.model.description.RobotDescription.to_dict`) in ``attrs["robot"]``
+    without ``robot_name``: its right sole and its mass (the dict's, the log's
+    ``attrs["mass"]``, else the named robot's model)."""
+    import math
+
+    from grfguard.model.robot import RobotConfig
+
+    mass = math.nan
+    for m in (d.get("mass"), df.attrs.get("mass")):
+        try:
+            mass = float(m)
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(mass) and mass > 0:
+            break
+        mass = math.nan
+    foot = d["feet"].get("r")
+    try:
+        sole = (float(foot["length"]), float(foot["width"]), float(foot["corner_inset"]))
+    except (KeyError, TypeError, ValueError):
+        sole = None
+    if sole is None or not math.isfinite(mass):
+        if isinstance(d.get("name"), str):
+            return monitor_robot(df, d["name"])
+        raise LogFormatError(
+            "log.attrs['robot'] is a described robot's dict without a usable mass and "
+            f"right sole (feet.r length, width, corner_inset): {d!r:.120}; set "
+            "attrs['robot_name'] (e.g. 'g1') or pass robot=...")
+    return RobotConfig(name=str(d.get("name", "robot")), mass=mass, foot_length=sole[0],
+                       foot_width=sole[1], sensor_inset=sole[2])
 
 
 def with_described_vfs(df: pd.DataFrame, robot: Any = None, **kwargs: Any) -> pd.DataFrame:

@@ -113,14 +113,14 @@ class VirtualForceSensor:
     """Virtual foot force sensor, streaming (``update``, ``update_array``) and batch (``run``).
 
     Args:
-        robot: Robot description.
+        robot: Robot description (required; :meth:`for_log` reads it from a log).
         config: Settings (default :class:`VFSConfig`).
         kinematics: Optional prebuilt :class:`KinematicModel` (shares the MuJoCo model).
         compiled: Must be True (the former ``False``, the pure-Python stages, is the test
             reference ``tests/reference/vfs_stages.py``).
 
     Raises:
-        ConfigError: ``compiled=False``.
+        ConfigError: ``compiled=False``, or no ``robot``.
 
     Example:
         >>> vfs = VirtualForceSensor.for_log(log)
@@ -143,7 +143,14 @@ class VirtualForceSensor:
                 "reference tests/reference/vfs_stages.py (PythonVFS). For the pure-Python "
                 "detector use Monitor(..., compiled=False)."
             )
-        self.robot = robot if robot is not None else RobotConfig()
+        if robot is None:
+            raise ConfigError(
+                "VirtualForceSensor: no robot (robot=None): the virtual sensor needs the "
+                "robot's description (mass, geometry, sensor layout) and never guesses it; "
+                "pass a RobotConfig (e.g. grfguard.model.robot.load_robot('ROBOT.toml'), "
+                "or grfguard.SURALP) or use VirtualForceSensor.for_log(log) (the log's "
+                "robot)")
+        self.robot = robot
         self.config = config if config is not None else VFSConfig()
         self.kin = kinematics if kinematics is not None else KinematicModel(self.robot)
         self.mass = self.kin.mass

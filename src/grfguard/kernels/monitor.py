@@ -751,7 +751,7 @@ def warm_monitor() -> None:
     guard = InputGuard(robot)
     from grfguard.detect.standing import StandingStage
 
-    for vk in (None, VFSKernel(VirtualForceSensor())):
+    for vk in (None, VFSKernel(VirtualForceSensor(robot))):
         k = MonitorKernel(prm, guard, vk, StandingStage(cfg.dt_s, weight_n=robot.weight))
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))

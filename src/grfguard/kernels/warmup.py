@@ -24,8 +24,10 @@ def warm_up() -> float:
     t0 = time.perf_counter()
     from grfguard.estimate.vfs import VirtualForceSensor
     from grfguard.kernels.vfs import N_IN, VFSKernel
+    from grfguard.model.robot import RobotConfig
 
-    k = VFSKernel(VirtualForceSensor())
+    # the reference robot: the kernels compile for argument types, not for a robot
+    k = VFSKernel(VirtualForceSensor(RobotConfig()))
     X = np.full((2, N_IN), np.nan)
     k.run(X)
     k.step(X[0])
