@@ -121,3 +121,18 @@ def test_anchor_hold_is_a_setting_of_its_own():
     assert dataclasses.replace(cfg, anchor_hold=True).anchor_hold is True
     with pytest.raises(Exception, match="anchor_hold"):
         VFSConfig(anchor_hold=1)  # type: ignore[arg-type]
+
+
+def test_a_twin_with_another_anchor_rule_does_not_share_the_front(walk):
+    """The twin takes the main sensor's odometry only when both follow the same rule."""
+    from grfguard.detect.system import quiet_vfs_config
+    from grfguard.estimate.vfs import VirtualForceSensor
+    from grfguard.kernels.vfs import twin_shareable
+
+    def shareable(main_hold: bool, twin_hold: bool) -> bool:
+        m = VirtualForceSensor.for_log(walk, VFSConfig(anchor_hold=main_hold))
+        q = VirtualForceSensor.for_log(walk, quiet_vfs_config(VFSConfig(anchor_hold=twin_hold)))
+        return twin_shareable(m.kernel(), q.kernel())
+
+    assert shareable(False, False) and shareable(True, True)
+    assert not shareable(False, True) and not shareable(True, False)
