@@ -118,7 +118,9 @@ def test_anchor_hold_keeps_the_twin_as_accurate(walk, reference):
 def test_anchor_hold_is_a_setting_of_its_own():
     cfg = VFSConfig()
     assert cfg.anchor_hold is False
-    assert dataclasses.replace(cfg, anchor_hold=True).anchor_hold is True
+    hold = dataclasses.replace(cfg, anchor_hold=True)
+    assert hold.anchor_hold is True
+    assert VFSConfig.from_toml(hold.to_toml()) == hold != cfg
     with pytest.raises(Exception, match="anchor_hold"):
         VFSConfig(anchor_hold=1)  # type: ignore[arg-type]
 
@@ -136,3 +138,19 @@ def test_a_twin_with_another_anchor_rule_does_not_share_the_front(walk):
 
     assert shareable(False, False) and shareable(True, True)
     assert not shareable(False, True) and not shareable(True, False)
+
+
+def test_streaming_equals_batch_with_anchor_hold(walk):
+    bad, first = _nan_joints(walk, 3.0, 30)
+    n = first + 400  # through the stretch and the settling
+    rows = bad.iloc[:n].to_dict("records")
+    for compiled in (True, False):
+        mon = Monitor.for_log(bad, config=HOLD, compiled=compiled)
+        out = mon.run(bad)
+        mon.reset()
+        st = pd.DataFrame([mon.update(r) for r in rows], index=bad.index[:n])
+        for c in VFS:
+            np.testing.assert_array_equal(st[c].to_numpy(float),
+                                          out[c].to_numpy(float)[:n], err_msg=c)
+        np.testing.assert_array_equal(st[FLAGS].to_numpy(bool),
+                                      out[FLAGS].to_numpy(bool)[:n])
