@@ -103,6 +103,14 @@ class VFSConfig:
     #: Decide contact per corner from the kinematic corner heights (the plan only as a
     #: fallback); False uses the planned stance only (the paper).
     kinematic_contact: bool = True
+    #: Leg odometry in double support: keep the anchor foot while it is flat (move the
+    #: anchor to the other stance foot only once that one is flat and the anchor is not,
+    #: or when the anchor foot lifts). False (the former rule) moves it whenever the other
+    #: stance foot is flat: in a flat double support the anchor then alternates every
+    #: sample, and without the accelerometer the forces depend on the parity of that
+    #: alternation (after a break of an odd number of samples, up to ~100 N apart until
+    #: the next single support: BENCHMARKS.md "Twin sensor after a break").
+    anchor_hold: bool = False
     # ------------------------------------------------------------------ paper CoM filter
     #: LIPM CoM height ``z_c`` in [m] for the paper's filter; 0 means "from the model
     #: at the first sample".
@@ -144,6 +152,7 @@ class VFSConfig:
             "kinematic_contact",
             "use_accelerometer",
             "accelerometer_vertical",
+            "anchor_hold",
         ):
             if not isinstance(getattr(self, flag), bool):
                 raise ConfigError(f"vfs.{flag} must be true or false, got {getattr(self, flag)!r}")

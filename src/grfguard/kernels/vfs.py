@@ -92,7 +92,8 @@ N_OUT = 22
 _P_DT, _P_KATT, _P_CH, _P_G, _P_MASS, _P_KC, _P_SW = 0, 1, 2, 3, 4, 5, 6
 _P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10, 11, 12
 _P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
-N_PRM = 40  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
+_P_ANCHOR_HOLD = 40  # VFSConfig.anchor_hold (after the vfs_paper block)
+N_PRM = 41  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
 # int parameters (iprm)
 _IP_TRUNK, _IP_ROOT, _IP_JOINTS = 0, 1, 2
 _IP_IMU = _IP_JOINTS + _NJ
@@ -502,7 +503,9 @@ def _stance(x, prm, pk):
 def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
     """Leg odometry (no anchor attitude: the rotation correction is the identity):
     the trunk position in the world (3 floats) [m] and the ground height [m]; the anchor
-    foot switches when the other foot is in stance and flat (or the anchor lifts)."""
+    foot switches when the other foot is in stance and flat (or the anchor lifts); with
+    ``anchor_hold`` only when the other is flat and the anchor is not (or it lifts): a
+    flat double support then keeps its anchor instead of alternating every sample."""
     if state[_S_ANCHOR] < 0:
         _init_anchor(state, pk, sxp, st0, st1)
     a_ = int(state[_S_ANCHOR])
@@ -517,6 +520,9 @@ def _leg_odometry(state, prm, pk, sxp, tmp8, st0, st1):
             < prm[_P_CH])
     st_a = st0 if a_ == 0 else st1
     st_o = st1 if a_ == 0 else st0
+    if flat and prm[_P_ANCHOR_HOLD] != 0.0:  # anchor_hold: the flat anchor stays
+        flat = (max(tmp8[4 * a_], tmp8[4 * a_ + 1], tmp8[4 * a_ + 2], tmp8[4 * a_ + 3])
+                - ground >= prm[_P_CH])
     if st_o and (flat or not st_a):
         state[_S_ANCHOR] = ob
         state[_S_PWA] = pwt0 + sxp[9 + ob, 0]
@@ -1075,7 +1081,7 @@ def twin_shareable(main: VFSKernel, twin: VFSKernel) -> bool:
         return False
     free = np.zeros(N_PRM, bool)
     free[list(_TWIN_FREE_PRM)] = True
-    free[18:] = True  # the non-default stages (their flags are checked above / own state)
+    free[18:_P_ANCHOR_HOLD] = True  # the non-default stages (flags checked above)
     if not np.array_equal(pm[~free], pt[~free]) or not np.array_equal(main.ci, twin.ci):
         return False
     if pm[P_KANC] != pt[P_KANC] or pm[P_COM_PAPER] != pt[P_COM_PAPER] or (
@@ -1131,7 +1137,8 @@ class VFSKernel:
         prm[_P_HAS_REF] = float(has_ref)
         prm[_P_BODY_MASS_SUM] = float(kin.body_mass.sum())
         prm[_P_QIT : _P_QIT + 4] = kin._q_IT
-        prm[18:] = extra_params(cfg, vfs.points_F)
+        prm[18:_P_ANCHOR_HOLD] = extra_params(cfg, vfs.points_F)
+        prm[_P_ANCHOR_HOLD] = float(cfg.anchor_hold)
         self.prm = prm
         #: Input row layout (:data:`IN_COLUMNS`; the paper's CoM filter also reads the
         #: force sensors and the planned ZMP: :data:`PAPER_IN_COLUMNS`).
