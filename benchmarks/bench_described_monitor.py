@@ -239,6 +239,8 @@ def main() -> None:
     ap.add_argument("--part", choices=("both", "g1", "talos", "clean"), default="both",
                     help="g1 or talos alone, or only the fault-free walks of both (clean): "
                     "print only, BENCHMARKS.md is not updated")
+    ap.add_argument("--no-write", action="store_true",
+                    help="print only; BENCHMARKS.md is not updated (to compare with it)")
     args = ap.parse_args()
     t0 = time.perf_counter()
     part = "" if args.part == "both" else f"--part {args.part} "
@@ -254,7 +256,7 @@ def main() -> None:
     lines += ["", f"Wall time {time.perf_counter() - t0:.0f} s."]
     body = "\n".join(lines)
     print(body)
-    if args.part == "both":
+    if args.part == "both" and not args.no_write:
         update_section(SECTION, body)
 
 
