@@ -41,15 +41,19 @@ def test_butter_refuses_what_scipy_refuses() -> None:
         butter_lowpass(2.5, 10.0, 1000.0)  # type: ignore[arg-type]
 
 
+def _printed_by(code: str) -> str:
+    """What ``code`` prints in a fresh interpreter (a clean ``sys.modules``)."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True).stdout.strip()
+
+
 def test_monitor_import_does_not_load_scipy_signal() -> None:
     code = ("import sys, grfguard.cli, grfguard.pipeline, grfguard.estimate.vfs, "
             "grfguard.kernels.vfs; from grfguard.estimate.vfs import VirtualForceSensor; "
             "from grfguard.model.robot import SURALP; VirtualForceSensor(SURALP); "
             "print(sorted(m for m in ('scipy.signal', 'matplotlib', 'plotly') "
             "if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.strip()
-    assert out == "[]"
+    assert _printed_by(code) == "[]"
 
 
 @pytest.mark.parametrize("order", range(1, 9))
@@ -81,6 +85,4 @@ def test_grfguard_run_does_not_load_scipy_signal(tmp_path) -> None:
             "assert n == 2500, n; "
             "print(sorted(m for m in sys.modules if m.startswith(('scipy.signal', "
             "'scipy.stats', 'scipy.interpolate', 'scipy.optimize'))))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.strip()
-    assert out == "[]"
+    assert _printed_by(code) == "[]"

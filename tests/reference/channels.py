@@ -11,14 +11,12 @@ channel and sample. The compiled kernel (:mod:`grfguard.kernels.channels`, behin
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from grfguard.detect.blocks import cusum_step
-from grfguard.detect.channels import ChannelConfig, _channels, _contact_columns, _side
-from grfguard.errors import LogFormatError
+from grfguard.detect.channels import ChannelMonitor, _channels, _contact_columns, _side
 
 _KINDS = ("offset", "drift", "gain")
 
@@ -100,35 +98,14 @@ class _Channel:
         self.srr += r * r
 
 
-class PyChannelMonitor:
-    """Per-channel detection, kind, recovery and flag clearing (module docstring), batch
-    (:meth:`run`) or one sample at a time (:meth:`update`); :meth:`run` is :meth:`update`
-    over the rows, so both give the same outputs.
-
-    Args:
-        config: Scales and thresholds (:func:`calibrate_channels`).
-        dt_s: Sampling period [s] (for ``const_s`` and ``clear_s`` in samples); None: the
-            median time step of the log (:meth:`run`) or the first time step
-            (:meth:`update`).
-
-    Example:
-        >>> cfg = calibrate_channels([with_described_vfs(clean_walk)])
-        >>> out = ChannelMonitor(cfg).run(with_described_vfs(faulty_walk))
-        >>> out["flag_ft_r_fz"], out["kind_ft_r_fz"], out["recovered_ft_r_fz"]
-        >>> live = ChannelMonitor(cfg, dt_s=0.001)
-        >>> row_out = live.update(row)   # dict: time, ft_*, vfs_*, contact_est_* or _ref_*
-    """
-
-    def __init__(self, config: ChannelConfig, dt_s: float | None = None) -> None:
-        self.config = config
-        self._dt_given = dt_s
-        self.channels: list[str] | None = None
-        self.reset()
+class PyChannelMonitor(ChannelMonitor):
+    """The former pure-Python :class:`~grfguard.detect.channels.ChannelMonitor`: the
+    interface (:meth:`update`, the sigma check) is the shipped class's; :meth:`run` loops
+    the Python step below over the rows and :meth:`_step` replaces the compiled step."""
 
     def reset(self) -> None:
         """Forget everything (flags, sums, contact history, channel list)."""
-        self.dt_s = self._dt_given
-        self._t_prev = math.nan
+        super().reset()
         self.gate = PyContactPhases(self.config.guard_s)
         self._state: dict[str, _Channel] = {}
 
@@ -170,56 +147,6 @@ class PyChannelMonitor:
                                                       "source": self.config.source}}
         return out
 
-    def _check(self, chans: list[str]) -> None:
-        missing = [c for c in chans if c not in self.config.sigma]
-        if missing:
-            raise LogFormatError(f"channel monitor: no calibrated sigma for {missing}; "
-                                 "run calibrate_channels on fault-free logs of this robot")
-
-    # -------------------------------------------------------------- streaming
-    def update(self, sample: dict[str, Any]) -> dict[str, Any]:
-        """One sample (``time``, ``ft_<side>_<axis>``, ``vfs_<side>_<axis>``,
-        ``contact_est_<side>`` or ``contact_ref_<side>``); returns ``flag_<ch>``,
-        ``kind_<ch>``, ``fault_est_<ch>``, ``recovered_<ch>`` and ``onset_est_<ch>`` of
-        every channel. The channels are fixed at the first call (every calibrated
-        channel the sample carries with its virtual channel). A missing or non-numeric
-        value is taken as NaN (no test; never an exception).
-
-        Raises:
-            LogFormatError: At the first call, when the sample has no F/T channel with
-                its virtual channel.
-        """
-        if self.channels is None:
-            chans = [c for c in self.config.sigma if c in sample and f"vfs_{c[3:]}" in sample]
-            if not chans:
-                raise LogFormatError("channel monitor: the sample has no calibrated "
-                                     "ft_<side>_<axis> channel with its vfs_<side>_<axis>")
-            self.channels = chans
-
-        def num(key: str) -> float:
-            try:
-                return float(sample.get(key, math.nan))
-            except (TypeError, ValueError):
-                return math.nan
-
-        def contact(side: str) -> bool:
-            c = num(f"contact_est_{side}")
-            return (c if math.isfinite(c) else num(f"contact_ref_{side}")) > 0.5
-
-        t = num("time")
-        if not math.isfinite(t):
-            t = self._t_prev + (self.dt_s or 0.0) if math.isfinite(self._t_prev) else 0.0
-        if self.dt_s is None and math.isfinite(self._t_prev) and t > self._t_prev:
-            self.dt_s = t - self._t_prev
-        res = self._step(t, contact("r"), contact("l"), [num(c) for c in self.channels],
-                         [num(f"vfs_{c[3:]}") for c in self.channels])
-        out: dict[str, Any] = {}
-        for c, (fl, kd, fe, rc, on) in zip(self.channels, res, strict=True):
-            out[f"flag_{c}"], out[f"kind_{c}"], out[f"fault_est_{c}"] = fl, kd, fe
-            out[f"recovered_{c}"], out[f"onset_est_{c}"] = rc, on
-        return out
-
-    # ------------------------------------------------------------------- core
     def _step(self, t: float, cr: bool, cl: bool, xs: list[float],
               vs: list[float]) -> list[tuple[bool, str, float, float, float]]:
         self._t_prev = t

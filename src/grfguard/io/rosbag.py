@@ -31,6 +31,7 @@ import pandas as pd
 
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.io import _cdr
+from grfguard.io.anyread import is_bag
 from grfguard.io.bagwrite import META_TOPIC
 from grfguard.io.schema import IMU_ACC, IMU_GYRO, IMU_QUAT, TIME, force_col
 from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES
@@ -227,16 +228,6 @@ def _signal(column: str, spec: Any, interp: str, where: str) -> Signal:
     interp = spec.get("interpolation", interp)
     _check_interp(interp, f"{where}.interpolation")
     return Signal(column, str(spec["topic"]), str(spec.get("field", "data")), idx, interp)
-
-
-def is_bag(path: str | Path) -> bool:
-    """True for a ROS bag: a rosbag2 directory, ``*.mcap``, ``*.db3`` or a ROS 1 ``*.bag``."""
-    p = Path(path)
-    if p.is_dir():
-        return (p / "metadata.yaml").exists() or any(
-            q.suffix in (".mcap", ".db3") for q in p.iterdir()
-        )
-    return p.suffix.lower() in (".mcap", ".db3", ".bag")
 
 
 # --------------------------------------------------------------------------- reading

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import errno
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -132,71 +131,39 @@ class _Blocks:
         log = log.copy(deep=False)
         log.attrs = {}  # column access would deep-copy the metadata every time
         self.km, self.mon, self.k, self.log = km, mon, k, log
-        self.new = self._new_names()
+        self.new = [name for name, _, _ in km.output_rows(k)]
         self.src = [(km._column(log, c) if c in log.columns else None) for c in k.in_cols]
         # the log's own columns (those the monitor does not replace), converted once
         self.keep = {c: _arrow(log[c]) for c in log.columns if c not in self.new}
         self.order = [*log.columns, *(c for c in self.new if c not in log.columns)]
-        m = min(_CHUNK, rows)
-        self.X = np.empty((m, len(k.in_cols)))
-        self.Yc = np.empty((m, len(k.out_cols)))
-        self.EXc = np.empty((m, km.N_EX))
+        self.bufs = km.chunk_buffers(k, min(_CHUNK, rows))
         self.Y = np.empty((len(k.out_cols), rows))  # each output column contiguous
         self.EX = np.empty((rows, km.N_EX))
-
-    def _new_names(self) -> list[str]:
-        """The monitor's output columns in ``run_frame``'s order."""
-        km, k = self.km, self.k
-        names = list(km.OUT_COLUMNS) if k.with_vfs else []
-        for i in range(8):
-            names += [km._FLAG_COLS[i], km._KIND_COLS[i]]
-        for i in range(8):
-            names += [km._REC_COLS[i], km._ETA_COLS[i]]
-        if k.with_system:
-            names += ["model_mismatch", "model_mismatch_reason"]
-        return [*names, "system_state", "system_reason"]
-
-    def _loop(self, a: int, b: int) -> None:
-        """The compiled loop over rows ``a:b`` into the block buffers."""
-        km, k = self.km, self.k
-        for s in range(a, b, _CHUNK):
-            e = min(b, s + _CHUNK)
-            xb = self.X[: e - s]
-            for j, arr in enumerate(self.src):
-                xb[:, j] = arr[s:e] if arr is not None else math.nan
-            yb, eb = self.Yc[: e - s], self.EXc[: e - s]
-            km.monitor_run_packed(xb, yb, eb, k.F, k.I)
-            self.Y[:, s - a:e - a] = yb.T
-            self.EX[s - a:e - a] = eb
 
     def block(self, a: int, b: int) -> dict[str, Any]:
         import pyarrow as pa
 
         km, k = self.km, self.k
-        self._loop(a, b)
         m = b - a
-        Y, EX = self.Y[:, :m], self.EX[:m]
+        Y = self.Y[:, :m].T  # rows x columns, each column contiguous
+        EX = self.EX[:m]
+        km.run_rows(k, self.src, a, b, self.bufs, Y, EX)
         new: dict[str, Any] = {}
-        o = 0
-        if k.with_vfs:
-            for j, c in enumerate(km.OUT_COLUMNS):
-                new[c] = _float_array(Y[j])
-            o = km._NV
-        for i in range(8):
-            new[km._FLAG_COLS[i]] = pa.array(Y[o + i] != 0.0)
-            new[km._KIND_COLS[i]] = _names(Y[o + 8 + i], km.KIND_NAMES)
-        for i in range(8):
-            new[km._REC_COLS[i]] = _float_array(Y[o + 24 + i])
-            new[km._ETA_COLS[i]] = _float_array(Y[o + 16 + i])
-        if k.with_system:
-            new["model_mismatch"] = pa.array(Y[o + 33] != 0.0)
-            new["model_mismatch_reason"] = _arrow(km._mismatch_reasons(Y[o + 33:].T,
-                                                                        k.vib_config))
-        codes = Y[o + 32].astype(np.int64)
-        new["system_state"] = _names(codes, km.SYSTEM_STATES)
-        part = self.log.iloc[a:b] if (EX[:, 0] != 0.0).any() else None
-        new["system_reason"] = _arrow(km._reasons(self.mon, part, codes, self.src[0][a:b],
-                                                  EX))
+        for name, typ, j in km.output_rows(k):
+            if typ == "float":
+                new[name] = _float_array(Y[:, j])
+            elif typ == "flag":
+                new[name] = pa.array(Y[:, j] != 0.0)
+            elif typ == "kind":
+                new[name] = _names(Y[:, j], km.KIND_NAMES)
+            elif typ == "mismatch_reason":
+                new[name] = _arrow(km._mismatch_reasons(Y[:, j:], k.vib_config))
+            elif typ == "state":
+                new[name] = _names(Y[:, j], km.SYSTEM_STATES)
+            else:  # "reason"
+                part = self.log.iloc[a:b] if (EX[:, 0] != 0.0).any() else None
+                new[name] = _arrow(km._reasons(self.mon, part, Y[:, j].astype(np.int64),
+                                               self.src[0][a:b], EX))
         return {c: (new[c] if c in new else self.keep[c].slice(a, m)) for c in self.order}
 
 

@@ -629,45 +629,74 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
     log = log.copy(deep=False)
     log.attrs = {}  # column access would deep-copy the metadata every time
     n = len(log)
-    cols = list(k.in_cols)
-    src = [(_column(log, c) if c in log.columns else None) for c in cols]
-    # chunks of 4096 rows: the row-major chunk buffers stay in the cache while they are
-    # transposed into the column-major output (32768 rows: about 0.4 us/sample more)
+    src = [(_column(log, c) if c in log.columns else None) for c in k.in_cols]
     Y = np.empty((n, len(k.out_cols)), order="F")  # columns contiguous: no copy each
     EX = np.empty((n, N_EX))
-    m = min(chunk, n)
-    X = np.empty((m, len(cols)))
-    Yc = np.empty((m, len(k.out_cols)))  # one buffer per run (MonitorKernel.run's own
-    EXc = np.empty((m, N_EX))  # arrays would be fresh, page-faulted memory every chunk)
-    for a in range(0, n, chunk):
-        b = min(n, a + chunk)
-        xb = X[: b - a]
-        for j, arr in enumerate(src):
-            xb[:, j] = arr[a:b] if arr is not None else math.nan
-        yb, eb = Yc[: b - a], EXc[: b - a]
-        monitor_run_packed(xb, yb, eb, k.F, k.I)  # = k.run(xb), into the buffers
-        Y[a:b] = yb
-        EX[a:b] = eb
+    run_rows(k, src, 0, n, chunk_buffers(k, min(chunk, n)), Y, EX)
     new: dict[str, Any] = {}
+    for name, typ, j in output_rows(k):
+        if typ == "float":
+            new[name] = Y[:, j]
+        elif typ == "flag":
+            new[name] = Y[:, j] != 0.0
+        elif typ == "kind":
+            new[name] = codes_to_str(Y[:, j].astype(np.int64), KIND_NAMES)
+        elif typ == "mismatch_reason":
+            new[name] = _mismatch_reasons(Y[:, j:], k.vib_config)
+        elif typ == "state":
+            new[name] = codes_to_str(Y[:, j].astype(np.int64), SYSTEM_STATES)
+        else:  # "reason"
+            new[name] = _reasons(mon, log, Y[:, j].astype(np.int64), src[0], EX)
+    return _with_columns(log, new)
+
+
+def chunk_buffers(k: MonitorKernel, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row-major input, output and extra buffers of ``rows`` rows for :func:`run_rows`
+    (one set per run: ``MonitorKernel.run``'s own arrays would be fresh, page-faulted
+    memory every chunk)."""
+    return (np.empty((rows, len(k.in_cols))), np.empty((rows, len(k.out_cols))),
+            np.empty((rows, N_EX)))
+
+
+def run_rows(k: MonitorKernel, src: list[Any], a: int, b: int,
+             bufs: tuple[np.ndarray, np.ndarray, np.ndarray], Y: np.ndarray,
+             EX: np.ndarray) -> None:
+    """The compiled loop over rows ``a:b`` of the input columns ``src`` (None: a column
+    the log lacks, NaN) in chunks of the buffers' length, into rows ``0:b - a`` of ``Y``
+    (rows x output columns, any memory order) and ``EX``. Chunks of 4096 rows keep the
+    row-major chunk buffers in the cache while they are transposed into a column-major
+    ``Y`` (32768 rows: about 0.4 us/sample more)."""
+    X, Yc, EXc = bufs
+    for s in range(a, b, max(1, len(X))):
+        e = min(b, s + len(X))
+        xb = X[: e - s]
+        for j, arr in enumerate(src):
+            xb[:, j] = arr[s:e] if arr is not None else math.nan
+        yb, eb = Yc[: e - s], EXc[: e - s]
+        monitor_run_packed(xb, yb, eb, k.F, k.I)  # = k.run(xb), into the buffers
+        Y[s - a:e - a] = yb
+        EX[s - a:e - a] = eb
+
+
+def output_rows(k: MonitorKernel) -> list[tuple[str, str, int]]:
+    """The monitor's output columns in ``Monitor.run``'s order, each as (name, type,
+    index of its column of the kernel output). Types: ``float`` (the value), ``flag``
+    (value != 0), ``kind`` (a :data:`KIND_NAMES` code), ``mismatch_reason`` (the text
+    of the system columns from that index on), ``state`` (a :data:`SYSTEM_STATES` code)
+    and ``reason`` (``system_reason``, from the state codes at that index)."""
+    out: list[tuple[str, str, int]] = []
     o = 0
     if k.with_vfs:
-        for j, c in enumerate(OUT_COLUMNS):
-            new[c] = Y[:, j]
+        out += [(c, "float", j) for j, c in enumerate(OUT_COLUMNS)]
         o = _NV
-    kinds = Y[:, o + 8:o + 16].astype(np.int64)
     for i in range(8):
-        new[_FLAG_COLS[i]] = Y[:, o + i] != 0.0
-        new[_KIND_COLS[i]] = codes_to_str(kinds[:, i], KIND_NAMES)
+        out += [(_FLAG_COLS[i], "flag", o + i), (_KIND_COLS[i], "kind", o + 8 + i)]
     for i in range(8):
-        new[_REC_COLS[i]] = Y[:, o + 24 + i]
-        new[_ETA_COLS[i]] = Y[:, o + 16 + i]
+        out += [(_REC_COLS[i], "float", o + 24 + i), (_ETA_COLS[i], "float", o + 16 + i)]
     if k.with_system:
-        new["model_mismatch"] = Y[:, o + 33] != 0.0
-        new["model_mismatch_reason"] = _mismatch_reasons(Y[:, o + 33:], k.vib_config)
-    codes = Y[:, o + 32].astype(np.int64)
-    new["system_state"] = codes_to_str(codes, SYSTEM_STATES)
-    new["system_reason"] = _reasons(mon, log, codes, src[0], EX)
-    return _with_columns(log, new)
+        out += [("model_mismatch", "flag", o + 33),
+                ("model_mismatch_reason", "mismatch_reason", o + 33)]
+    return [*out, ("system_state", "state", o + 32), ("system_reason", "reason", o + 32)]
 
 
 def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> Any:
