@@ -14,7 +14,12 @@ from grfguard.cli import run_log
 from grfguard.detect.monitor import Monitor
 from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.guard import SYSTEM_STATES
-from grfguard.io.codes import codes_to_categorical, codes_to_str, strings_to_str
+from grfguard.io.codes import (
+    codes_to_arrow,
+    codes_to_categorical,
+    codes_to_str,
+    strings_to_str,
+)
 from grfguard.io.logio import read_log, write_log
 from grfguard.io.runwriter import write_run
 from grfguard.kernels.detect import KIND_NAMES
@@ -55,6 +60,26 @@ def test_codes_to_str_equals_python_strings() -> None:
         codes_to_str(np.array([0, len(SYSTEM_STATES)]), SYSTEM_STATES)
     with pytest.raises(IndexError):
         codes_to_str(np.array([-1]), SYSTEM_STATES)
+
+
+@pytest.mark.parametrize("code", range(len(KIND_NAMES)))
+def test_one_code_columns_equal_python_strings(code) -> None:
+    """A column of one code (built from its buffers, not by ``take``), for every name,
+    also the empty one, and a column mixing codes: the Arrow array of Python strings."""
+    import pyarrow as pa
+
+    names = (*KIND_NAMES, "", "drölf")
+    for codes in (np.full(1000, code), np.full(3, len(names) - 2), np.full(3, len(names) - 1),
+                  np.array([code, 0, len(names) - 1]), np.zeros(0, dtype=np.int64)):
+        ref = pa.array([names[int(c)] for c in codes], type=pa.large_string())
+        got = codes_to_arrow(codes.astype(float), names)
+        got.validate(full=True)
+        assert got.equals(ref)
+        if codes.size:  # (pandas types an empty column of objects as object)
+            ref_pd = pd.Series(np.array(names, dtype=object)[codes.astype(np.int64)])
+            pd.testing.assert_series_equal(pd.Series(codes_to_str(codes, names)), ref_pd)
+    with pytest.raises(IndexError):
+        codes_to_arrow(np.full(4, len(names)), names)
 
 
 def test_zero_copy_read_equals_the_copying_read(bad_walk) -> None:
