@@ -115,7 +115,8 @@ def test_written_logs_round_trip_with_split_floats(tmp_path) -> None:
     enc = {meta.column(i).path_in_schema: meta.column(i).encodings
            for i in range(meta.num_columns)}
     assert "BYTE_STREAM_SPLIT" in enc["x"] and "BYTE_STREAM_SPLIT" in enc["f32"]
-    assert "RLE_DICTIONARY" in enc["s"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert "RLE_DICTIONARY" in enc["k"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert "RLE_DICTIONARY" not in enc["s"] and "PLAIN" in enc["s"]  # text: plain + zstd
     assert meta.column(0).compression == "ZSTD"
     assert meta.column(0).is_stats_set and not meta.column(1).is_stats_set  # time only
 
