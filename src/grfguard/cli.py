@@ -49,6 +49,12 @@ def simulate(
     reality: Annotated[
         str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
     ] = None,
+    calibration_poses: Annotated[
+        bool, typer.Option(
+            "--calibration-poses",
+            help="Start with the calibration routine (each sole tilted onto each corner "
+            "in turn, about 30 s of standing), then walk: data for `calibrate --model`.")
+    ] = False,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard._cliutil import check_seed, resolve_robot
@@ -65,13 +71,19 @@ def simulate(
         robot = None  # SURALP keeps its dedicated simulation
     _check_memory_for(duration)
     if is_described_robot(robot):
+        if calibration_poses:
+            from grfguard.errors import ConfigError
+
+            raise ConfigError(
+                f"--calibration-poses is implemented for SURALP-type robots only, not for "
+                f"{robot}; simulate it without the option")
         check_output(output, inputs=[robot], what="log")
         simulate_described(robot, output, duration, step_length, step_period,
                            double_support, seed, noise, rate)
         return
     rob = resolve_robot(robot) or SURALP
     check_output(output, inputs=[robot], what="log")
-    gait_kw: dict[str, Any] = {"duration": duration}
+    gait_kw: dict[str, Any] = {"duration": duration, "calibration_poses": calibration_poses}
     if step_length is not None:
         gait_kw["step_length"] = step_length
     if step_period is not None:
