@@ -618,7 +618,8 @@ def main() -> None:
     # start-up); an explicit MUJOCO_GL is kept
     os.environ.setdefault("MUJOCO_GL", "disable")
     try:
-        app()
+        if not _run_fast(sys.argv[1:]):
+            app()
     except SystemExit as exc:
         if not (_FAST_EXIT and exc.code in (0, None)):
             raise
@@ -626,6 +627,25 @@ def main() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(0)  # skips the interpreter's teardown (about 0.3 s after a long log)
+
+
+def _run_fast(argv: list[str]) -> bool:
+    """``grfguard run`` on a plain command line (:func:`grfguard._fastargs.parse`: the
+    same keyword arguments as typer gives, without typer's per-option pydantic
+    validators, about 0.1 s of the command); False (nothing done) for any other command
+    line, which typer then parses and reports as always."""
+    if not argv or argv[0] != "run":
+        return False
+    from grfguard._fastargs import parse
+
+    kw = parse(run, argv[1:])
+    if kw is None:
+        return False
+    try:
+        run(**kw)  # errors: one line and typer.Exit(2), as under typer
+    except typer.Exit as exc:
+        raise SystemExit(exc.exit_code) from None
+    return True
 
 
 #: Set by a command whose work is complete (outputs closed and renamed): :func:`main` then
