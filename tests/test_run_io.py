@@ -14,7 +14,12 @@ from grfguard.cli import run_log
 from grfguard.detect.monitor import Monitor
 from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.guard import SYSTEM_STATES
-from grfguard.io.codes import codes_to_categorical, codes_to_str, strings_to_str
+from grfguard.io.codes import (
+    codes_to_arrow,
+    codes_to_categorical,
+    codes_to_str,
+    strings_to_str,
+)
 from grfguard.io.logio import read_log, write_log
 from grfguard.io.runwriter import write_run
 from grfguard.kernels.detect import KIND_NAMES
@@ -57,6 +62,26 @@ def test_codes_to_str_equals_python_strings() -> None:
         codes_to_str(np.array([-1]), SYSTEM_STATES)
 
 
+@pytest.mark.parametrize("code", range(len(KIND_NAMES)))
+def test_one_code_columns_equal_python_strings(code) -> None:
+    """A column of one code (built from its buffers, not by ``take``), for every name,
+    also the empty one, and a column mixing codes: the Arrow array of Python strings."""
+    import pyarrow as pa
+
+    names = (*KIND_NAMES, "", "drölf")
+    for codes in (np.full(1000, code), np.full(3, len(names) - 2), np.full(3, len(names) - 1),
+                  np.array([code, 0, len(names) - 1]), np.zeros(0, dtype=np.int64)):
+        ref = pa.array([names[int(c)] for c in codes], type=pa.large_string())
+        got = codes_to_arrow(codes.astype(float), names)
+        got.validate(full=True)
+        assert got.equals(ref)
+        if codes.size:  # (pandas types an empty column of objects as object)
+            ref_pd = pd.Series(np.array(names, dtype=object)[codes.astype(np.int64)])
+            pd.testing.assert_series_equal(pd.Series(codes_to_str(codes, names)), ref_pd)
+    with pytest.raises(IndexError):
+        codes_to_arrow(np.full(4, len(names)), names)
+
+
 def test_zero_copy_read_equals_the_copying_read(bad_walk) -> None:
     path, _ = bad_walk
     ref = read_log(path)
@@ -90,7 +115,8 @@ def test_written_logs_round_trip_with_split_floats(tmp_path) -> None:
     enc = {meta.column(i).path_in_schema: meta.column(i).encodings
            for i in range(meta.num_columns)}
     assert "BYTE_STREAM_SPLIT" in enc["x"] and "BYTE_STREAM_SPLIT" in enc["f32"]
-    assert "RLE_DICTIONARY" in enc["s"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert "RLE_DICTIONARY" in enc["k"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert "RLE_DICTIONARY" not in enc["s"] and "PLAIN" in enc["s"]  # text: plain + zstd
     assert meta.column(0).compression == "ZSTD"
     assert meta.column(0).is_stats_set and not meta.column(1).is_stats_set  # time only
 

@@ -170,9 +170,6 @@ class _Blocks:
 def _names(codes: np.ndarray, names: Any) -> Any:
     """``names[codes]`` as an Arrow ``large_string`` array (the type pandas' ``str``
     columns are written with)."""
-    import pyarrow as pa
+    from grfguard.io.codes import codes_to_arrow
 
-    idx = np.asarray(codes).astype(np.int64)
-    if idx.size and (idx.min() < 0 or idx.max() >= len(names)):
-        raise IndexError(f"codes must be in [0, {len(names)}), got {idx.min()}..{idx.max()}")
-    return pa.array(list(names), type=pa.large_string()).take(pa.array(idx))
+    return codes_to_arrow(codes, names)
