@@ -238,3 +238,32 @@ def test_for_log_warm_false_leaves_the_kernels_to_their_first_call(bad_walk,
     assert calls == [1]
     out = cold.run(log)
     assert len(out) == len(log) and "system_state" in out
+
+
+def test_run_log_loads_the_kernel_without_scipy_linalg(bad_walk, tmp_path) -> None:
+    """numba's BLAS check at the first kernel load is served without importing the
+    scipy.linalg package (grfguard.cli._blas_probe_without_scipy_linalg), the paper's
+    observer solves its Riccati equation only when used; afterwards scipy.linalg imports
+    as usual and numba's linear algebra works."""
+    import subprocess
+    import sys
+
+    path, _ = bad_walk
+    code = (
+        "import sys; from pathlib import Path; import grfguard.cli as cli\n"
+        "n = cli.run_log(Path(sys.argv[1]), Path(sys.argv[2]))\n"
+        "print(n, 'scipy.linalg' in sys.modules, 'numba.np.arraymath' in sys.modules,\n"
+        "      any(m.startswith('scipy.linalg.') for m in sys.modules))\n"
+        "import numba, numpy as np, scipy.linalg\n"
+        "print(float(scipy.linalg.solve([[2.0]], [4.0])[0]),\n"
+        "      hasattr(scipy.linalg, 'cython_blas'),\n"
+        "      float(numba.njit(lambda a: np.dot(a, a))(np.ones(3))))\n"
+    )
+    out = tmp_path / "out.parquet"
+    res = subprocess.run([sys.executable, "-c", code, str(path), str(out)],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    first, second = res.stdout.split("\n")[:2]
+    assert first.split()[1:] == ["False", "True", "False"], first
+    assert second.split() == ["2.0", "True", "3.0"], second
+    assert int(first.split()[0]) == len(read_log(out))
