@@ -224,30 +224,53 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, quat_B: np
                                v_B: np.ndarray, omega_B: np.ndarray, a_B: np.ndarray,
                                alpha_B: np.ndarray, w: np.ndarray
                                ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_inverse_dynamics` by the compiled inverse dynamics
-    (:func:`grfguard.kernels.rne.wrench_batch`); same outputs to about 1e-12 relative."""
-    from grfguard.kernels.rne import new_work, wrench_batch
+    """:func:`_inverse_dynamics` by the compiled inverse dynamics: for a tree of hinges
+    (Talos, G1) :func:`grfguard.kernels.rne.hinge_wrench_batch` (fixed bodies merged, one
+    pass per stage over the moving bodies), else :func:`grfguard.kernels.rne
+    .wrench_batch` (MuJoCo's arithmetic); same outputs to about 1e-12 relative."""
+    from grfguard.kernels.rne import hinge_wrench_batch, new_work, wrench_batch
 
     m = robot.model
     n = sig.t.size
-    jv = robot.dof_adr(robot.joint_names)
     ft = robot.description.sensing == "ft"
     feet_b = [m.body(f.body).id for f in robot.description.feet]
     names = [f"{s}_sole" for s in SIDES] + ([f"{s}_ft" for s in SIDES] if ft else [])
     sites = np.array([m.site(nm).id for nm in names], np.int64)
-    qvel = np.zeros((n, m.nv))
-    qacc = np.zeros((n, m.nv))
-    jv = _index(jv)
-    qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
-    qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
     ground = np.zeros((n, 2, 6))
     ft_out = np.zeros((n, 2, 6))
-    wrench_batch(_qpos_rows(robot, sig.q, quat_B), qvel, qacc, np.ascontiguousarray(w, float),
-                 rm.tree.arrays(), rm.site_arrays(), rm.dyn_arrays(), sites,
-                 new_work(rm, sites.size), rm.root, np.array(feet_b, np.int64), ft, ground,
-                 ft_out)
+    ht = _hinge_tree(robot, tuple(int(s) for s in sites), tuple(feet_b))
+    if ht is not None:
+        c = np.ascontiguousarray
+        base = (c(quat_to_rotation(quat_B)), c(v_B, float), c(omega_B, float), c(a_B, float),
+                c(alpha_B, float))
+        hinge_wrench_batch(c(sig.q, float), c(sig.qd, float), c(sig.qdd, float), base,
+                           c(w, float), c(m.opt.gravity, float), ht.arrays(), ft, ground,
+                           ft_out)
+    else:
+        jv = _index(robot.dof_adr(robot.joint_names))
+        qvel = np.zeros((n, m.nv))
+        qacc = np.zeros((n, m.nv))
+        qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
+        qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
+        wrench_batch(_qpos_rows(robot, sig.q, quat_B), qvel, qacc,
+                     np.ascontiguousarray(w, float), rm.tree.arrays(), rm.site_arrays(),
+                     rm.dyn_arrays(), sites, new_work(rm, sites.size), rm.root,
+                     np.array(feet_b, np.int64), ft, ground, ft_out)
     return (np.ascontiguousarray(np.swapaxes(ground, 0, 1)),
             np.ascontiguousarray(np.swapaxes(ft_out, 0, 1)))
+
+
+def _hinge_tree(robot: LoadedRobot, sites: tuple[int, ...], feet: tuple[int, ...]):
+    """The robot's :class:`grfguard.kernels.rne.HingeTree` for these sites and feet
+    (None when its tree is not one of hinges), built once per robot."""
+    from grfguard.kernels.rne import HingeTree
+
+    key = (sites, feet)
+    cache = vars(robot).setdefault("_hinge_trees", {})  # 3 ms to build for Talos
+    if key not in cache:
+        cols = {int(a): c for c, a in enumerate(robot.qpos_adr(robot.joint_names))}
+        cache[key] = HingeTree.from_mujoco(robot.model, cols, list(sites), list(feet))
+    return cache[key]
 
 
 def _stance_weights(df: pd.DataFrame, R_WB: np.ndarray, p_rel: np.ndarray) -> np.ndarray:
