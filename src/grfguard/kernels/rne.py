@@ -756,3 +756,22 @@ def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
         _ht_sample(t, q, qd, qdd, base, g, ht, R, X, S, V, A, Fb, tot)
         _ht_wrenches(t, W[t, 0], W[t, 1], base[0][t], ft, ht, R, X, tot, P, rot, gb, ground,
                      ft_out)
+
+
+@njit
+def hinge_frames_batch(q, ht, out_pos, out_mat):
+    """Poses of the :class:`HingeTree`'s sites in base axes (base at the origin, identity
+    attitude) for every row of the joint angles ``q`` (T, nj): ``out_pos`` (T, k, 3),
+    ``out_mat`` (T, k, 9) (row-major rotations)."""
+    parent, B, u, axis, anchor, qcol, q0 = ht[:7]
+    site_body, site_pos, site_rot = ht[12], ht[13], ht[14]
+    n = parent.shape[0]
+    R, X, S = np.zeros((n, 9)), np.zeros((n, 3)), np.empty((n, 6))
+    R[0, 0], R[0, 4], R[0, 8] = 1.0, 1.0, 1.0
+    for t in range(q.shape[0]):
+        for i in range(1, n):
+            j = qcol[i]
+            th = q[t, j] - q0[i] if j >= 0 else 0.0
+            _ht_pose(i, parent[i], math.cos(th), math.sin(th), B, u, axis, anchor, R, X, S)
+        for k in range(site_body.shape[0]):
+            _site_pose(k, site_body, site_pos, site_rot, R, X, out_pos[t, k], out_mat[t, k])
