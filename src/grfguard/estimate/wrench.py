@@ -207,7 +207,7 @@ def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
     :func:`grfguard.kernels.rne.hinge_frames_batch` (fixed bodies merged), else
     :func:`grfguard.kernels.rne.frames_batch` (MuJoCo's arithmetic); same outputs to a few
     units in the last place."""
-    from grfguard.kernels.rne import frames_batch, hinge_frames_batch
+    from grfguard.kernels.rne import frames_batch, hinge_frames_batch, site_paths
 
     m = robot.model
     n = sig.t.size
@@ -216,7 +216,8 @@ def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
     feet = tuple(m.body(f.body).id for f in robot.description.feet)
     ht = _hinge_tree(robot, tuple(int(s) for s in sites), feet)
     if ht is not None:
-        hinge_frames_batch(np.ascontiguousarray(sig.q, float), ht.arrays(), pos, mat)
+        hinge_frames_batch(np.ascontiguousarray(sig.q, float), ht.arrays(), site_paths(ht),
+                           pos, mat)
     else:
         frames_batch(_qpos_rows(robot, sig.q, None), rm.tree.arrays(), rm.site_arrays(),
                      sites, pos, mat)
@@ -511,19 +512,24 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
 
 def _small_rotations(rv: np.ndarray) -> np.ndarray:
     """(T, 3, 3) rotations of small rotation vectors (T, 3) [rad], first order made
-    orthonormal.
-
-    The SVD stays (2-3 µs per sample): the closed-form polar factor ``(I + K) / s +
-    rv rv^T / (s (s + 1))``, ``s = sqrt(1 + |rv|^2)``, equals it to 6e-15 but moved the
-    virtual wrenches of a 20 s Talos walk by up to 3e-6 N:
-    :func:`~grfguard.rotations.rotation_to_quat` (one square root per component) turns a
-    1e-15 change of a near-identity rotation into about 1e-8 rad of attitude. Replacing
-    the SVD needs that conversion made accurate first (a deliberate output change)."""
-    K = np.zeros((rv.shape[0], 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rv[:, 2], rv[:, 1], -rv[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rv[:, 2], -rv[:, 1], rv[:, 0]
-    U, _, Vt = np.linalg.svd(np.eye(3) + K)
-    return U @ Vt
+    orthonormal: the polar factor of ``I + [rv]x`` in closed form, ``(I + K) / s + rv
+    rv^T / (s (s + 1))`` with ``s = sqrt(1 + |rv|^2)`` (equal to the SVD's ``U V^T`` to
+    about 1e-15, some ten times cheaper)."""
+    n = rv.shape[0]
+    s = np.sqrt(1.0 + np.einsum("ti,ti->t", rv, rv))
+    a = 1.0 / s
+    b = a / (s + 1.0)
+    out = (b[:, None, None] * rv[:, :, None]) * rv[:, None, :]
+    for k in range(3):
+        out[:, k, k] += a
+    k0, k1, k2 = rv[:, 0] * a, rv[:, 1] * a, rv[:, 2] * a
+    out[:, 0, 1] -= k2
+    out[:, 0, 2] += k1
+    out[:, 1, 2] -= k0
+    out[:, 1, 0] += k2
+    out[:, 2, 0] -= k1
+    out[:, 2, 1] += k0
+    return out.reshape(n, 3, 3)
 
 
 def _share(w: np.ndarray, alone: np.ndarray, p_r: np.ndarray, p_l: np.ndarray) -> np.ndarray:

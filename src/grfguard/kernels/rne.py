@@ -758,18 +758,31 @@ def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
                      ft_out)
 
 
+def site_paths(ht: HingeTree) -> np.ndarray:
+    """The moving bodies from the base to the tree's sites (parents first, base left out):
+    all :func:`hinge_frames_batch` needs."""
+    need: set[int] = set()
+    for b in ht.site_body:
+        b = int(b)
+        while b > 0:
+            need.add(b)
+            b = int(ht.parent[b])
+    return np.array(sorted(need), np.int64)
+
+
 @njit
-def hinge_frames_batch(q, ht, out_pos, out_mat):
+def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
     """Poses of the :class:`HingeTree`'s sites in base axes (base at the origin, identity
     attitude) for every row of the joint angles ``q`` (T, nj): ``out_pos`` (T, k, 3),
-    ``out_mat`` (T, k, 9) (row-major rotations)."""
+    ``out_mat`` (T, k, 9) (row-major rotations). ``bodies``: :func:`site_paths` (only
+    these are posed)."""
     parent, B, u, axis, anchor, qcol, q0 = ht[:7]
     site_body, site_pos, site_rot = ht[12], ht[13], ht[14]
     n = parent.shape[0]
     R, X, S = np.zeros((n, 9)), np.zeros((n, 3)), np.empty((n, 6))
     R[0, 0], R[0, 4], R[0, 8] = 1.0, 1.0, 1.0
     for t in range(q.shape[0]):
-        for i in range(1, n):
+        for i in bodies:
             j = qcol[i]
             th = q[t, j] - q0[i] if j >= 0 else 0.0
             _ht_pose(i, parent[i], math.cos(th), math.sin(th), B, u, axis, anchor, R, X, S)
