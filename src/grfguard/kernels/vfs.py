@@ -47,7 +47,13 @@ from grfguard.io.schema import (
     ZMP_REF,
 )
 from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
-from grfguard.kernels.fk import TreeModel, fk_bodies, fk_site_pos, fk_sites, subtree_com_of
+from grfguard.kernels.fk import (
+    TreeModel,
+    fk_bodies_kind,
+    fk_site_pos,
+    fk_sites,
+    subtree_com_of,
+)
 from grfguard.kernels.nnls import prior_qp
 from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     N_XSTATE,
@@ -440,7 +446,8 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     """Forward kinematics with the trunk at the origin: bodies, IMU/corner/sole sites,
     corner contact points ``pk`` [m]; returns the trunk-relative CoM (3 floats) [m]."""
     (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
-     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order) = tree
+     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order,
+     body_kind) = tree
     site_body, site_sameframe, site_pos, site_quat = sites
     qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
     tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
@@ -463,9 +470,9 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     for j in range(_NJ):
         qin[iprm[_IP_JOINTS + j]] = x[_I_Q + j]
     # fk_tree's bodies, then the subtree CoM of the trunk only (same bits)
-    fk_bodies(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
-              body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-              body_order, qpos, xpos, xquat, xmat, xipos, ximat)
+    fk_bodies_kind(qin, body_kind, body_parent, body_jntadr, body_jntnum, body_sameframe,
+                   body_pos, body_quat, body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis,
+                   jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat)
     sel[0] = iprm[_IP_IMU]
     for k in range(8):
         sel[1 + k] = iprm[_IP_CORNERS + k]
@@ -908,9 +915,11 @@ def _unpack(cf, ci):
     site_sameframe = view1d(ci, i, ns)
     i += ns
     body_order = view1d(ci, i, nb - 1)
+    i += nb - 1
+    body_kind = view1d(ci, i, nb)
     tree = (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
             body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-            body_order)
+            body_order, body_kind)
     sites = (site_body, site_sameframe, site_pos, site_quat)
     return prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites
 
@@ -1181,6 +1190,7 @@ class VFSKernel:
         self.ci = np.ascontiguousarray(np.concatenate([
             header, ip, tm.body_parent, tm.body_jntadr, tm.body_jntnum, tm.body_sameframe,
             tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe, tm.body_order,
+            tm.body_kinds(),
         ]), dtype=np.int64)
         self._entry = None
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
