@@ -72,6 +72,15 @@ def test_robot_of_a_described_robot_dict_takes_its_sole_and_mass(g1) -> None:
         (34.0, foot.length, foot.width, foot.corner_inset))
 
 
+def test_robot_of_a_described_robot_dict_refuses_two_different_soles(g1) -> None:
+    d = g1.description.to_dict()
+    d["feet"] = {**d["feet"], "l": {**d["feet"]["l"], "width": d["feet"]["l"]["width"] + 0.01}}
+    log = pd.DataFrame({"time": [0.0, 0.001]})
+    log.attrs["robot"] = {**d, "mass": 34.0}
+    with pytest.raises(LogFormatError, match=r"one sole for both feet.*feet.r and feet.l"):
+        robot_of(log)
+
+
 def test_estimate_corrections_refuses_a_log_without_robot(walk) -> None:
     with pytest.raises(LogFormatError, match="names no robot"):
         estimate_corrections(_bare(walk))

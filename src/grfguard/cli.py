@@ -6,8 +6,10 @@ on bad input are reported in one line saying what to fix, with exit code 2.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -49,6 +51,12 @@ def simulate(
     reality: Annotated[
         str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
     ] = None,
+    calibration_poses: Annotated[
+        bool, typer.Option(
+            "--calibration-poses",
+            help="Start with the calibration routine (each sole tilted onto each corner "
+            "in turn, about 30 s of standing), then walk: data for `calibrate --model`.")
+    ] = False,
 ) -> None:
     """Simulate a MuJoCo walk and write its log (with ground truth)."""
     from grfguard._cliutil import check_seed, resolve_robot
@@ -65,13 +73,19 @@ def simulate(
         robot = None  # SURALP keeps its dedicated simulation
     _check_memory_for(duration)
     if is_described_robot(robot):
+        if calibration_poses:
+            from grfguard.errors import ConfigError
+
+            raise ConfigError(
+                f"--calibration-poses is implemented for SURALP-type robots only, not for "
+                f"{robot}; simulate it without the option")
         check_output(output, inputs=[robot], what="log")
         simulate_described(robot, output, duration, step_length, step_period,
                            double_support, seed, noise, rate)
         return
     rob = resolve_robot(robot) or SURALP
     check_output(output, inputs=[robot], what="log")
-    gait_kw: dict[str, Any] = {"duration": duration}
+    gait_kw: dict[str, Any] = {"duration": duration, "calibration_poses": calibration_poses}
     if step_length is not None:
         gait_kw["step_length"] = step_length
     if step_period is not None:
@@ -287,8 +301,9 @@ def run_log(
     if unit_check:
         check_log_plausible(df, rob, str(log))
     mark("checks")
-    result = _run_segments(df, config=config, thresholds=thresholds, method=method, vfs=vfs,
-                           compiled=compiled, mark=mark, output=output)
+    with _blas_probe_without_scipy_linalg():
+        result = _run_segments(df, config=config, thresholds=thresholds, method=method,
+                               vfs=vfs, compiled=compiled, mark=mark, output=output)
     if isinstance(result, int):  # written block by block (io/runwriter.py)
         mark("run_write")
         return result
@@ -297,6 +312,45 @@ def run_log(
     write_log(result, output)
     mark("write")
     return len(result)
+
+
+@contextlib.contextmanager
+def _blas_probe_without_scipy_linalg() -> Iterator[None]:
+    """numba's first kernel load checks that BLAS is there by importing
+    ``scipy.linalg.cython_blas`` (and LAPACK's), which makes Python import the whole
+    ``scipy.linalg`` package first: about 0.12 s of ``grfguard run``'s start-up for two
+    small extension modules (the monitor itself needs no scipy). Inside this context the
+    two modules are loaded alone for that check; on leaving, if ``scipy.linalg`` was
+    still not imported, they are forgotten again, so that a later ``import scipy.linalg``
+    is the ordinary one. Anything unexpected (another scipy layout, numba's context
+    already set up) leaves the imports to numba as usual."""
+    names: list[str] = []
+    if "scipy.linalg" not in sys.modules and "numba.np.arraymath" not in sys.modules:
+        try:
+            import importlib.machinery
+            import importlib.util
+
+            spec = importlib.util.find_spec("scipy.linalg")
+            where = spec.submodule_search_locations if spec is not None else None
+            for sub in ("cython_blas", "cython_lapack"):
+                name = f"scipy.linalg.{sub}"
+                found = importlib.machinery.PathFinder.find_spec(name, where)
+                if found is None or found.loader is None or name in sys.modules:
+                    break
+                module = importlib.util.module_from_spec(found)
+                sys.modules[name] = module
+                names.append(name)
+                found.loader.exec_module(module)
+        except Exception:  # noqa: BLE001 - any failure: numba imports scipy.linalg itself
+            for name in names:
+                sys.modules.pop(name, None)
+            names = []
+    try:
+        yield
+    finally:
+        if "scipy.linalg" not in sys.modules:
+            for name in names:
+                sys.modules.pop(name, None)
 
 
 def _check_run_inputs(config: Path | None, thresholds: Path | None, robot: str | None) -> Any:
@@ -606,7 +660,8 @@ def main() -> None:
     # start-up); an explicit MUJOCO_GL is kept
     os.environ.setdefault("MUJOCO_GL", "disable")
     try:
-        app()
+        if not _run_fast(sys.argv[1:]):
+            app()
     except SystemExit as exc:
         if not (_FAST_EXIT and exc.code in (0, None)):
             raise
@@ -614,6 +669,25 @@ def main() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(0)  # skips the interpreter's teardown (about 0.3 s after a long log)
+
+
+def _run_fast(argv: list[str]) -> bool:
+    """``grfguard run`` on a plain command line (:func:`grfguard._fastargs.parse`: the
+    same keyword arguments as typer gives, without typer's per-option pydantic
+    validators, about 0.1 s of the command); False (nothing done) for any other command
+    line, which typer then parses and reports as always."""
+    if not argv or argv[0] != "run":
+        return False
+    from grfguard._fastargs import parse
+
+    kw = parse(run, argv[1:])
+    if kw is None:
+        return False
+    try:
+        run(**kw)  # errors: one line and typer.Exit(2), as under typer
+    except typer.Exit as exc:
+        raise SystemExit(exc.exit_code) from None
+    return True
 
 
 #: Set by a command whose work is complete (outputs closed and renamed): :func:`main` then

@@ -23,7 +23,12 @@ Uses only the redundancy of fault-free walking (no simulation truth):
   averages; the moving centre of pressure makes the eight ``w_i`` identifiable. Without a
   measured mass only the products ``k_i m`` are known: the gains are normalized to mean 1
   and the mass becomes the weight the load cells see; with ``measured_mass_kg``,
-  ``k_i = 1 / (w_i m)``.
+  ``k_i = 1 / (w_i m)``. A flat sole's load is planar, so a walk leaves each sole's twist
+  of gains (corners 1, 4 against 2, 3) to a ridge; data with calibration poses
+  (``GaitConfig.calibration_poses``: a sole standing on one corner) pin it: standing-still
+  samples (:func:`_still`, encoders only) are then exact rows (``a_z = 0``), see
+  :func:`_posed_static_rows`, and posed soles are left out of the flat-sole fits
+  (:func:`_soles_parallel`).
 * **Trunk CoM** (horizontal): the time average of the ZMP equals that of the CoM
   (the mean horizontal acceleration of a walk from rest to rest is zero), so the mean of
   ``CoP - CoM_model`` (corrected forces and attitude, trunk-yaw frame) is
@@ -92,6 +97,29 @@ ENCODER_PRIOR_RAD = math.radians(0.5)
 #: sensors on other gaits (0.18 m steps: 80 episodes); the net tilt on the ankles, 2.41x
 #: and no flag on those walks.
 APPLY_ENCODER_OFFSETS = False
+#: Largest deviation of the two soles' relative tilt from its median that counts as both
+#: soles flat [deg] (walks: within 0.2 deg; a posed sole: 2 deg).
+SOLE_TILT_TOL_DEG = 0.5
+#: Margin around a posed sole (relative tilt over twice ``SOLE_TILT_TOL_DEG``) excluded
+#: from the flat-sole fits [s] (the ramp into and out of the pose).
+SOLE_POSE_MARGIN_S = 0.6
+#: Standing still (:func:`_still`): joint speed below [rad/s] over blocks of [s], for at
+#: least [s], trimmed at both ends by [s].
+STILL_JOINT_SPEED = 0.01
+STILL_BLOCK_S = 0.05
+STILL_MIN_S = 0.3
+STILL_TRIM_S = 0.1
+#: A still foot whose load is this non-planar (twist over load) stands on a corner or an
+#: edge; corner poses of at least POSED_MIN_S [s] per foot enable the static rows.
+POSED_TWIST_RATIO = 0.5
+POSED_MIN_S = 1.0
+#: Weight of a standing-still row of the gain fit against a walking one. A still row's
+#: reference (m g) is exact and its noise (8 cells x 2 N over 50 ms: ~0.8 N) independent
+#: from row to row; a walking row's reference is the odometry's, ~1 N off in the 2 Hz
+#: band and correlated over ~25 rows (10 ms apart): inverse-variance weighting gives ~40;
+#: measured (all-gaps robot, seed 1) 10: 0.27 %, 100: 0.23 %, 1000: 0.21 %, still rows
+#: only: 0.36 % (gains relative to each other, ridge 0 - 0.001).
+STATIC_ROW_WEIGHT = 100.0
 #: Accelerometer RMS above 10 Hz [m/s^2] up to which it is used in the gain fit.
 ACC_QUIET_RMS = 0.2
 
@@ -471,9 +499,33 @@ def _loaded_double_support(d, zero: np.ndarray, robot: RobotConfig) -> np.ndarra
     feet carrying more than 15 % of the weight (zero-corrected readings); (T,) bool."""
     fz = d.f - zero
     load = np.column_stack([fz[:, :4].sum(1), fz[:, 4:].sum(1)])
-    return ((d.cref.min(axis=1) > 0.5)
-            & _away_from_edges(d.cref, d.dt)
-            & (load.min(axis=1) > 0.15 * robot.weight))
+    m = ((d.cref.min(axis=1) > 0.5)
+         & _away_from_edges(d.cref, d.dt)
+         & (load.min(axis=1) > 0.15 * robot.weight))
+    return m & _soles_parallel(d, robot, m)
+
+
+def _soles_parallel(d, robot: RobotConfig, m: np.ndarray) -> np.ndarray:
+    """(T,) bool: samples of ``m`` whose two soles are parallel: the relative tilt (leg
+    kinematics only, roll and pitch of ``R_BS,r^T R_BS,l``) within ``SOLE_TILT_TOL_DEG``
+    of its median over ``m``, and no sample within ``SOLE_POSE_MARGIN_S`` tilted by more
+    than twice that. Excludes a foot posed on an edge or a corner, with the ramps into
+    and out of the pose (``GaitConfig.calibration_poses``), from the flat-sole fits; on a
+    walk the relative tilt is constant (encoder offsets) within 0.2 deg: nothing is
+    excluded."""
+    idx = np.flatnonzero(m)
+    if not len(idx):
+        return np.zeros(len(m), dtype=bool)
+    _, Rr = leg_fk(robot, "r", np.zeros(3), np.eye(3), d.q[:, :6])
+    _, Rl = leg_fk(robot, "l", np.zeros(3), np.eye(3), d.q[:, 6:])
+    R_rel = np.swapaxes(Rr, 1, 2) @ Rl
+    tilt = np.column_stack([R_rel[:, 2, 1], -R_rel[:, 2, 0]])
+    dev = np.abs(tilt - np.median(tilt[idx], axis=0)).max(axis=1)
+    tol = math.radians(SOLE_TILT_TOL_DEG)
+    posed = (dev > 2 * tol).astype(float)
+    w = int(round(SOLE_POSE_MARGIN_S / d.dt))
+    near = np.convolve(posed, np.ones(2 * w + 1), mode="same") > 0
+    return m & (dev < tol) & ~near
 
 
 def _fit_imu_mount(data: list, robot: RobotConfig, zero: np.ndarray,
@@ -658,9 +710,16 @@ def _fit_gains(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.ndarr
                sigma: dict[str, float], odo: list | None = None) -> tuple[float, np.ndarray]:
     """Stage 5: mass [kg] and load-cell gains (8,) from the whole-body balance."""
     A_all, y_all, quiet = _gain_fit_rows(data, rob_fit, zero, b_a, R_BI, odo)
+    A_st = _posed_static_rows(data, zero, rob_fit.weight)
+    if A_st is not None:  # standing still: the load cells carry m g exactly
+        k = math.sqrt(STATIC_ROW_WEIGHT)
+        A_all = np.vstack([A_all, k * A_st])
+        y_all = np.concatenate([y_all, np.full(len(A_st), k * rob_fit.gravity)])
     w0 = float(np.linalg.lstsq(A_all.sum(axis=1, keepdims=True), y_all, rcond=None)[0][0])
-    # ridge toward equal gains for load patterns the walk does not excite (twist of a sole)
-    reg = (GAIN_RIDGE_QUIET if quiet else GAIN_RIDGE) * float((A_all**2).sum()) / 8.0
+    # ridge toward equal gains for load patterns the walk does not excite (twist of a
+    # sole); corner poses excite them: then only the small ridge
+    ridge = GAIN_RIDGE_QUIET if (quiet or A_st is not None) else GAIN_RIDGE
+    reg = ridge * float((A_all**2).sum()) / 8.0
     M = A_all.T @ A_all + reg * np.eye(8)
     w = np.linalg.solve(M, A_all.T @ y_all + reg * w0)
     res = y_all - A_all @ w
@@ -673,6 +732,51 @@ def _fit_gains(data: list, rob_fit: RobotConfig, zero: np.ndarray, b_a: np.ndarr
     var_km = np.clip(np.diag(cov), 0.0, None) * km**4
     sigma["mass_kg"] = float(math.sqrt(var_km.sum()) / 8.0)
     return mass, gains
+
+
+def _still(d) -> np.ndarray:
+    """(T,) bool: both feet planned in contact and every joint still (speed over
+    ``STILL_BLOCK_S`` below ``STILL_JOINT_SPEED``) for at least ``STILL_MIN_S``, less
+    ``STILL_TRIM_S`` at both ends (encoders only: the robot stands still)."""
+    n = max(1, int(round(STILL_BLOCK_S / d.dt)))
+    speed = np.full(len(d.q), np.inf)
+    if len(d.q) > n:
+        speed[n // 2: n // 2 + len(d.q) - n] = np.abs(d.q[n:] - d.q[:-n]).max(axis=1) / (n * d.dt)
+    m = np.r_[False, (speed < STILL_JOINT_SPEED) & (d.cref.min(axis=1) > 0.5), False]
+    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
+    out = np.zeros(len(d.q), dtype=bool)
+    trim = int(round(STILL_TRIM_S / d.dt))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if (b - a) * d.dt >= STILL_MIN_S:
+            out[a + trim: b - trim] = True
+    return out
+
+
+def _posed_static_rows(data: list, zero: np.ndarray, weight: float) -> np.ndarray | None:
+    """Loads [N] (n, 8) of the standing-still ``STILL_BLOCK_S`` blocks, when the logs
+    hold corner poses (``GaitConfig.calibration_poses``): each foot at least
+    ``POSED_MIN_S`` standing still with a non-planar load (``|f1 - f2 - f3 + f4|`` over
+    ``POSED_TWIST_RATIO`` of its load, the load over 5 % of ``weight`` [N]). A flat sole
+    carries a planar load (ratio near 0); only these rows show a sole's twist of gains.
+    None without such poses (a walk: the gain fit keeps its ridge)."""
+    blocks, posed = [], np.zeros(2)
+    for d in data:
+        n = max(1, int(round(STILL_BLOCK_S / d.dt)))
+        still = _still(d)
+        idx = np.flatnonzero(still[: len(still) // n * n].reshape(-1, n).all(axis=1))
+        if not len(idx):
+            continue
+        fz = _blocks(d.f - zero, n)[idx]
+        for i in range(2):
+            f = fz[:, 4 * i: 4 * i + 4]
+            load = f.sum(axis=1)
+            tw = np.abs(f[:, 0] - f[:, 1] - f[:, 2] + f[:, 3])
+            ok = (load > 0.05 * weight) & (tw > POSED_TWIST_RATIO * load)
+            posed[i] += ok.sum() * n * d.dt
+        blocks.append(fz)
+    if not blocks or posed.min() < POSED_MIN_S:
+        return None
+    return np.concatenate(blocks)
 
 
 def _fit_trunk_com(data: list, robot: RobotConfig, mass: float, gains: np.ndarray,

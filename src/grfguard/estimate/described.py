@@ -103,14 +103,19 @@ def monitor_robot(df: pd.DataFrame, robot: Any = None) -> Any:
             rob = described_robot(df, robot)
             desc, mass = rob.description, rob.mass
     fr, fl = desc.feet
-    shape = [(f.length, f.width, f.corner_inset) for f in (fr, fl)]
-    if shape[0] != shape[1]:
-        raise LogFormatError(
-            f"robot {desc.name!r}: the corner-cell monitor takes one sole for both feet; "
-            f"feet.r and feet.l differ (length, width, corner_inset = {shape[0]} vs "
-            f"{shape[1]}); give both feet the same sole in the robot TOML")
+    _check_one_sole(desc.name, *[(f.length, f.width, f.corner_inset) for f in (fr, fl)])
     return RobotConfig(name=desc.name, mass=float(mass), foot_length=fr.length,
                        foot_width=fr.width, sensor_inset=fr.corner_inset)
+
+
+def _check_one_sole(name: Any, right: tuple, left: tuple) -> None:
+    """Raise when the two soles (length, width, corner_inset) differ: the corner-cell
+    monitor takes one corner layout for both feet."""
+    if right != left:
+        raise LogFormatError(
+            f"robot {name!r}: the corner-cell monitor takes one sole for both feet; "
+            f"feet.r and feet.l differ (length, width, corner_inset = {right} vs "
+            f"{left}); give both feet the same sole in the robot TOML")
 
 
 def names_robot(df: pd.DataFrame) -> bool:
@@ -186,11 +191,17 @@ def _robot_of_description_dict(df: pd.DataFrame, d: Any) -> Any:
         if math.isfinite(mass) and mass > 0:
             break
         mass = math.nan
-    foot = d["feet"].get("r")
-    try:
-        sole = (float(foot["length"]), float(foot["width"]), float(foot["corner_inset"]))
-    except (KeyError, TypeError, ValueError):
-        sole = None
+    soles = []
+    for side in ("r", "l"):
+        foot = d["feet"].get(side)
+        try:
+            soles.append(
+                (float(foot["length"]), float(foot["width"]), float(foot["corner_inset"])))
+        except (KeyError, TypeError, ValueError):
+            soles.append(None)
+    sole = soles[0]
+    if sole is not None and soles[1] is not None:
+        _check_one_sole(d.get("name", "robot"), sole, soles[1])
     if sole is None or not math.isfinite(mass):
         if isinstance(d.get("name"), str):
             return monitor_robot(df, d["name"])

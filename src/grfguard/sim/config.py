@@ -67,6 +67,13 @@ class GaitConfig:
             position servos (removes the stance-leg sag and the tracking lag of an
             open-loop walk).
         first_swing: The foot that makes the first step, ``r`` or ``l``.
+        calibration_poses: Start with the calibration routine of
+            :mod:`grfguard.sim.routine` (SURALP-type robots): standing, each sole in turn
+            tilted 2 deg onto each of its corners and held 1.5 s while the other foot
+            carries most of the weight (30.3 s); ``start_time`` is lengthened to
+            cover it. For ``grfguard calibrate --model`` data: the corner poses make
+            each sole's load-cell gains identifiable (a walk loads the corners only
+            planarly).
     """
 
     step_length: float = 0.12
@@ -83,6 +90,7 @@ class GaitConfig:
     zmp_passes: int = 1
     torque_feedforward: bool = True
     first_swing: str = "r"
+    calibration_poses: bool = False
 
     def __post_init__(self) -> None:
         o = "gait"
@@ -110,6 +118,10 @@ class GaitConfig:
             raise ConfigError(
                 f"gait.first_swing = {self.first_swing!r} must be 'r' or 'l' (the foot that "
                 "makes the first step)"
+            )
+        if not isinstance(self.calibration_poses, bool):
+            raise ConfigError(
+                f"gait.calibration_poses = {self.calibration_poses!r} must be true or false"
             )
         if not isinstance(self.torque_feedforward, bool):
             raise ConfigError(

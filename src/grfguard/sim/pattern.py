@@ -28,6 +28,7 @@ from grfguard.model.kinematics import body_poses, center_of_mass, leg_ik
 from grfguard.model.mjcf import body_layout
 from grfguard.model.robot import SIDES, RobotConfig
 from grfguard.sim.config import GaitConfig
+from grfguard.sim.routine import ROUTINE_START_S, routine_duration, routine_soles, routine_zmp_knots
 
 __all__ = [
     "SAMPLE_RATE",
@@ -89,7 +90,17 @@ def resolve_gait(robot: RobotConfig, gait: GaitConfig) -> GaitConfig:
             f"gait.com_height = {com_h} m is above what straight legs reach "
             f"({robot.leg_length + robot.trunk_com_height:.3f} m); lower it"
         )
-    return dataclasses.replace(gait, com_height=float(com_h), swing_height=float(swing_h))
+    out = dataclasses.replace(gait, com_height=float(com_h), swing_height=float(swing_h))
+    if gait.calibration_poses:
+        start = round(ROUTINE_START_S + routine_duration() + 0.5, 3)
+        if gait.duration < start + gait.stop_time:
+            raise ConfigError(
+                f"gait.duration = {gait.duration} s is too short for the calibration poses "
+                f"(routine until {start:g} s, then stop_time {gait.stop_time:g} s); "
+                f"simulate at least {start + gait.stop_time + 10:g} s to walk after it"
+            )
+        out = dataclasses.replace(out, start_time=max(gait.start_time, start))
+    return out
 
 
 @dataclass(frozen=True)
@@ -243,10 +254,14 @@ def _feet_under_hips(robot: RobotConfig, n: int, x: float) -> np.ndarray:
     return feet
 
 
-def _ik_both(robot: RobotConfig, p_WB: np.ndarray, sole_pos: np.ndarray) -> np.ndarray:
+def _ik_both(robot: RobotConfig, p_WB: np.ndarray, sole_pos: np.ndarray,
+             sole_rot: np.ndarray | None = None) -> np.ndarray:
+    """Joints (T, 12) of both legs for an upright pelvis; soles flat unless ``sole_rot``
+    (2, T, 3, 3) gives their orientations."""
     eye = np.eye(3)
     return np.hstack(
-        [leg_ik(robot, side, p_WB, eye, sole_pos[i], eye) for i, side in enumerate(SIDES)]
+        [leg_ik(robot, side, p_WB, eye, sole_pos[i], eye if sole_rot is None else sole_rot[i])
+         for i, side in enumerate(SIDES)]
     )
 
 
@@ -278,6 +293,8 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     footsteps, swing = _footsteps(robot, gait)
     step_times = ts + np.arange(n) * T
     kt_a, kp_a = _zmp_knots(gait, footsteps, swing)
+    if gait.calibration_poses:
+        kt_a, kp_a = _with_routine_knots(kt_a, kp_a, footsteps)
     zmp = np.column_stack([np.interp(t, kt_a, kp_a[:, 0]), np.interp(t, kt_a, kp_a[:, 1])])
 
     # ---- feet at the 1 kHz samples and on the preview grid
@@ -287,17 +304,21 @@ def plan_walk(robot: RobotConfig, gait: GaitConfig) -> WalkPlan:
     tp = np.arange(n_p) * dtp
     sole, contact = _feet(t, footsteps, swing, gait)
     sole_p, _ = _feet(tp, footsteps, swing, gait)
+    rot = rot_p = None
+    if gait.calibration_poses:
+        sole, rot = _posed_soles(robot, t, sole)
+        sole_p, rot_p = _posed_soles(robot, tp, sole_p)
 
     # ---- two-stage preview control on its grid, CoM resampled to 1 kHz
     zmp_p = np.column_stack([np.interp(tp, kt_a, kp_a[:, 0]), np.interp(tp, kt_a, kp_a[:, 1])])
-    states, jerk, pelvis_p = _two_stage_preview(robot, gait, tp, zmp_p, sole_p)
+    states, jerk, pelvis_p = _two_stage_preview(robot, gait, tp, zmp_p, sole_p, rot_p)
     com_ref, com_vel_ref = _resample_com(t, dtp, sub, states, jerk, zc)
 
     # ---- pelvis at 1 kHz: the smooth pelvis-minus-CoM offset of the grid, cubic spline
     eye = np.eye(3)
     offset = CubicSpline(tp, pelvis_p - np.column_stack([states[:, 0], np.full(n_p, zc)]))(t)
     pelvis = com_ref + offset
-    q = _ik_both(robot, pelvis, sole)
+    q = _ik_both(robot, pelvis, sole, rot)
     check = np.arange(sub // 2, n_t, sub)
     com_err = float(
         np.abs(center_of_mass(robot, pelvis[check], eye, q[check]) - com_ref[check]).max()
@@ -362,8 +383,25 @@ def _zmp_knots(gait: GaitConfig, footsteps: np.ndarray,
     return np.asarray(kt), np.asarray(kp)
 
 
+def _with_routine_knots(kt: np.ndarray, kp: np.ndarray,
+                        footsteps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The walk's ZMP knots with the calibration routine's (:mod:`grfguard.sim.routine`)
+    in place of the initial stand's first knot pair (ZMP between the feet)."""
+    rt, rp = routine_zmp_knots(footsteps[:, 0])
+    return np.concatenate([rt, kt[1:]]), np.concatenate([np.asarray(rp), kp[1:]])
+
+
+def _posed_soles(robot: RobotConfig, t: np.ndarray,
+                 sole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sole positions (2, T, 3) [m] and orientations (2, T, 3, 3) with the calibration
+    routine's corner poses (:func:`grfguard.sim.routine.routine_soles`)."""
+    dp, rot = routine_soles(t, robot.sensor_positions_in_foot())
+    return sole + dp, rot
+
+
 def _two_stage_preview(
-    robot: RobotConfig, gait: GaitConfig, tp: np.ndarray, zmp_p: np.ndarray, sole_p: np.ndarray
+    robot: RobotConfig, gait: GaitConfig, tp: np.ndarray, zmp_p: np.ndarray, sole_p: np.ndarray,
+    rot_p: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Preview control on its grid ``tp``: CoM states (N, 3, 2), jerks (N, 2) and the
     pelvis positions (N, 3) [m].
@@ -379,7 +417,8 @@ def _two_stage_preview(
     pelvis_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
     for pass_i in range(gait.zmp_passes + 1):
         com_p = np.column_stack([states[:, 0], np.full(n_p, zc)])
-        pelvis_p, q_p = _pelvis_for_com(robot, com_p, sole_p, gait.com_iterations, pelvis_p)
+        pelvis_p, q_p = _pelvis_for_com(robot, com_p, sole_p, gait.com_iterations, pelvis_p,
+                                        rot_p)
         if pass_i == gait.zmp_passes:
             break
         err = zmp_p - multibody_zmp(robot, tp, pelvis_p, q_p)
@@ -455,6 +494,7 @@ def _pelvis_for_com(
     sole: np.ndarray,
     iterations: int,
     pelvis0: np.ndarray,
+    sole_rot: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Pelvis positions (T, 3) [m] whose multibody CoM is ``com``, and the joints (T, 12).
 
@@ -463,10 +503,10 @@ def _pelvis_for_com(
     """
     eye = np.eye(3)
     pelvis = pelvis0.copy()
-    q = _ik_both(robot, pelvis, sole)
+    q = _ik_both(robot, pelvis, sole, sole_rot)
     for _ in range(iterations + 1):
         pelvis = pelvis + (com - center_of_mass(robot, pelvis, eye, q))
-        q = _ik_both(robot, pelvis, sole)
+        q = _ik_both(robot, pelvis, sole, sole_rot)
     return pelvis, q
 
 

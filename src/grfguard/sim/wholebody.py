@@ -449,6 +449,11 @@ def simulate_robot(
     from grfguard import __version__
 
     gait = scaled_gait(robot) if gait is None else gait
+    if gait.calibration_poses:
+        raise ConfigError(
+            "gait.calibration_poses is implemented for RobotConfig robots (SURALP, "
+            f"grfguard robot show) only, not for the described robot {robot.name!r}; "
+            "simulate without it")
     noise = NoiseConfig() if noise is None else noise
     t0 = _time.perf_counter()
     plan = plan_wholebody(robot, gait)
