@@ -13,6 +13,8 @@ The other tree is imported as the package ``grfguard_before`` (a renamed copy)::
 
 Prints the largest output difference of the two trees, the minimum and median process
 CPU time per sample of each and the median of the per-slice ratios (this tree / before).
+With ``--monitor`` the whole compiled monitor loop (``MonitorKernel.run``, default monitor,
+VFS and twin inside) instead of the sensor alone.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ def main() -> None:
     ap.add_argument("--before", type=Path, required=True,
                     help="folder holding the package grfguard_before")
     ap.add_argument("--reps", type=int, default=150)
+    ap.add_argument("--monitor", action="store_true", help="the whole monitor loop")
     a = ap.parse_args()
     sys.path.insert(0, str(a.before))
     from grfguard_before.estimate.vfs import VirtualForceSensor as OldVFS
@@ -50,7 +53,9 @@ def main() -> None:
     X, has_gyro, has_ref = log_to_array(raw)
     new = VFSKernel(VirtualForceSensor.for_log(raw), has_gyro, has_ref)
     old = OldKernel(OldVFS.for_log(raw), has_gyro, has_ref)
-    yn, yo = new.run(X), old.run(X)
+    if a.monitor:
+        new, old, X = _monitor_kernels(raw)
+    yn, yo = _out(new, X), _out(old, X)
     diff = np.abs(yn - yo)
     print(f"largest |this - before|: corner forces {np.nanmax(diff[:, :8]):.2e} N, "
           f"all outputs {np.nanmax(diff):.2e}")
@@ -61,6 +66,8 @@ def main() -> None:
         for order in ((new, old), (old, new)):
             t = {}
             for k in order:
+                if a.monitor:
+                    k.reset()  # (VFSKernel.run resets by itself)
                 c = time.process_time()
                 k.run(X[m])
                 t[id(k)] = (time.process_time() - c) / SLICE * 1e6
@@ -72,6 +79,28 @@ def main() -> None:
           f"{len(ratio)} slice ratios {np.median(ratio):.3f} (quartiles "
           f"{np.percentile(ratio, 25):.3f}-{np.percentile(ratio, 75):.3f}); load "
           f"{os.getloadavg()[0]:.1f}")
+
+
+def _out(k, X):
+    """Outputs of a whole run from reset (the monitor's first array: its output row)."""
+    k.reset()
+    y = k.run(X)
+    return y[0] if isinstance(y, tuple) else y
+
+
+def _monitor_kernels(raw):
+    """The two trees' compiled monitors of ``raw`` and their input array (same layout)."""
+    from grfguard_before.detect import Monitor as OldMonitor
+
+    from grfguard.detect import Monitor
+
+    new = Monitor.for_log(raw)._kernel(True, True)
+    old = OldMonitor.for_log(raw)._kernel(True, True)
+    assert list(new.in_cols) == list(old.in_cols)
+    n = len(raw)
+    X = np.ascontiguousarray(np.column_stack([
+        raw[c].to_numpy(float) if c in raw else np.full(n, np.nan) for c in new.in_cols]))
+    return new, old, X
 
 
 if __name__ == "__main__":
