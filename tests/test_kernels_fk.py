@@ -139,3 +139,32 @@ def test_fast_kinematics_of_the_virtual_sensor_equal_fk_tree_bit_for_bit():
             assert np.array_equal(a, b)
         assert np.array_equal(np.array(com), ref[5][1])
         assert np.array_equal(sxp, sxp2)
+
+
+@pytest.mark.parametrize("robot", ["suralp", "random"])
+def test_unit_hinge_kinematics_equal_the_generic_ones(robot):
+    # fk_bodies_kind (unit hinges at the body origin without the products with zeros)
+    # gives the values of fk_bodies (MuJoCo's operations) on random configurations
+    from grfguard.kernels.fk import GENERIC, fk_bodies, fk_bodies_kind
+
+    model = (build_model(SURALP) if robot == "suralp"
+             else mujoco.MjModel.from_xml_string(random_tree_xml(30, 5)))
+    tm = TreeModel.from_mujoco(model)
+    kinds = tm.body_kinds()
+    if robot == "suralp":  # every leg body is a unit hinge; the trunk (free) is not
+        assert kinds[0] == GENERIC and kinds[1] == GENERIC
+        assert (kinds[2:] >= 0).all() and set(kinds[2:].tolist()) == {0, 1, 2}
+    ref, fast = tm.new_frames(), tm.new_frames()
+    (parent, jntadr, jntnum, sameframe, pos, quat, ipos, iquat, mass, jtype, qadr, axis, jpos,
+     qpos0, order) = tm.arrays()
+    rng = np.random.default_rng(7)
+    for t in range(300):
+        q = qpos0.copy()
+        q[3:7] = rng.normal(size=4)
+        q[7:] += rng.uniform(-2.0, 2.0, size=q.size - 7) * (t % 10 != 0)  # zero angles too
+        fk_bodies(q, parent, jntadr, jntnum, sameframe, pos, quat, ipos, iquat, jtype, qadr,
+                  axis, jpos, qpos0, order, np.zeros(model.nq), *ref[:5])
+        fk_bodies_kind(q, kinds, parent, jntadr, jntnum, sameframe, pos, quat, ipos, iquat,
+                       jtype, qadr, axis, jpos, qpos0, order, np.zeros(model.nq), *fast[:5])
+        for a, b in zip(ref[:5], fast[:5], strict=True):
+            assert np.array_equal(a, b)

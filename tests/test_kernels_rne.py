@@ -182,3 +182,130 @@ def test_estimate_wrenches_compiled_equals_mujoco_path(name, request) -> None:
     for k in new.sensor:
         assert np.abs(new.sensor[k] - old.sensor[k]).max() < 1e-9, k
     np.testing.assert_array_equal(new.contact, old.contact)
+
+
+HINGE_XML = """
+<mujoco>
+  <option gravity="0.4 -0.3 -9.81"/>
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint/>
+      <geom type="box" size="0.1 0.2 0.05" mass="5"/>
+      <body name="plate" pos="0.02 0 0.1" quat="0.9 0.2 0.1 0.3">
+        <geom type="box" size="0.05 0.05 0.01" pos="0.01 0.02 0" mass="0.4"/>
+        <body name="arm" pos="0.1 0.2 0" quat="0.8 0.1 0.3 0.2">
+          <joint name="a1" axis="0.3 0.5 0.8" pos="0.01 0.02 0.03"/>
+          <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1.3"/>
+          <body name="hand" pos="0.3 0 0">
+            <joint name="a2" axis="0 -1 0"/>
+            <geom type="sphere" size="0.02" pos="0.01 0.01 0" mass="0.02"/>
+            <site name="tip" pos="0.05 0 0.01" quat="0.7 0.7 0 0"/>
+          </body>
+        </body>
+      </body>
+      <body name="leg_r" pos="0 -0.1 -0.1">
+        <joint name="hr" axis="1 0 0" pos="0 0 0.02"/>
+        <geom type="box" size="0.03 0.04 0.2" pos="0.01 0 -0.2" mass="2"/>
+        <body name="foot_r" pos="0 0 -0.4" quat="0.99 0 0.1 0">
+          <joint name="ar" axis="0 1 0"/>
+          <geom type="box" size="0.1 0.05 0.02" pos="0.03 0 -0.03" mass="0.8"/>
+          <body name="sole_r" pos="0.02 0 -0.05">
+            <geom type="sphere" size="0.01" mass="0.05"/>
+            <site name="sole_r" pos="0.01 0 -0.01"/>
+          </body>
+          <site name="ft_r" pos="0 0 0.01" quat="0.9 0 0 0.3"/>
+        </body>
+      </body>
+      <body name="leg_l" pos="0 0.1 -0.1">
+        <joint name="hl" axis="0 0 1"/>
+        <geom type="box" size="0.03 0.04 0.2" pos="0.01 0 -0.2" mass="2"/>
+        <body name="foot_l" pos="0 0 -0.4">
+          <joint name="al" axis="0.2 1 0"/>
+          <geom type="box" size="0.1 0.05 0.02" pos="0.03 0 -0.03" mass="0.8"/>
+          <site name="sole_l" pos="0.03 0 -0.05"/>
+          <site name="ft_l" pos="0 0 0.01"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def _hinge_kernel(m, qpos, qvel, qacc, sites, feet, w, ft, skip=()):
+    """:func:`hinge_wrench_batch` on one state (joints in model order; the joints in
+    ``skip`` are left out of the columns: at qpos0, still)."""
+    from grfguard.kernels.rne import HingeTree, hinge_wrench_batch
+    from grfguard.rotations import quat_to_matrix
+
+    hinges = [j for j in range(1, m.njnt) if j not in skip]
+    cols = {int(m.jnt_qposadr[j]): c for c, j in enumerate(hinges)}
+    ht = HingeTree.from_mujoco(m, cols, list(sites), list(feet))
+    q = qpos[[m.jnt_qposadr[j] for j in hinges]][None]
+    qd = qvel[[m.jnt_dofadr[j] for j in hinges]][None]
+    qdd = qacc[[m.jnt_dofadr[j] for j in hinges]][None]
+    base = (quat_to_matrix(qpos[3:7])[None], qvel[None, :3], qvel[None, 3:6], qacc[None, :3],
+            qacc[None, 3:6])
+    ground, ft_out = np.zeros((1, 2, 6)), np.zeros((1, 2, 6))
+    hinge_wrench_batch(np.ascontiguousarray(q), np.ascontiguousarray(qd),
+                       np.ascontiguousarray(qdd), tuple(np.ascontiguousarray(b) for b in base),
+                       np.array([w], float), np.asarray(m.opt.gravity, float), ht.arrays(), ft,
+                       ground, ft_out)
+    return ht, ground[0], ft_out[0]
+
+
+@pytest.mark.parametrize("name", ["talos", "g1", "hinge_xml"])
+def test_hinge_tree_matches_mujoco(name, request) -> None:
+    """The merged hinge tree (fixed bodies folded into their moving parents, general axes,
+    anchors and offsets) gives MuJoCo's ground wrenches and F/T
+    readings on random states."""
+    if name == "hinge_xml":
+        m = mujoco.MjModel.from_xml_string(HINGE_XML)
+        soles, feet = [m.site("sole_r").id, m.site("sole_l").id], [m.body("foot_r").id,
+                                                                   m.body("foot_l").id]
+        fts, ft = [m.site("ft_r").id, m.site("ft_l").id], True
+    else:
+        robot = request.getfixturevalue(name)
+        m = robot.model
+        soles = [m.site(f"{s}_sole").id for s in SIDES]
+        feet = [m.body(f.body).id for f in robot.description.feet]
+        ft = robot.description.sensing == "ft"
+        fts = [m.site(f"{s}_ft").id for s in SIDES] if ft else []
+    d = mujoco.MjData(m)
+    rng = np.random.default_rng(7)
+    for trial in range(12):
+        qpos, qvel, qacc = _random_state(m, rng)
+        qpos[:3] = 0.0  # the kernel puts the base at the origin (the wrenches do not care)
+        w = (1.0, 0.0) if trial % 3 == 0 else ((0.0, 1.0) if trial % 3 == 1 else (0.5, 0.5))
+        ht, ground, ft_out = _hinge_kernel(m, qpos, qvel, qacc, soles + fts, feet, w, ft)
+        assert ht.parent.size == 1 + sum(int(m.body_jntnum[b]) for b in range(2, m.nbody))
+        f_ref, alone, _ = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet)
+        scale = max(1.0, np.abs(f_ref).max())
+        share = _share(np.array(w), alone, d.site_xpos[soles[0]], d.site_xpos[soles[1]])
+        assert np.abs(ground - share[:, None] * alone).max() < 1e-9 * scale
+        if ft:
+            _, _, ft_ref = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet, ground, fts)
+            assert np.abs(ft_out - ft_ref).max() < 1e-9 * scale
+
+
+def test_hinge_tree_joint_left_out_stays_at_qpos0() -> None:
+    """A hinge missing from the caller's columns is taken at qpos0, not moving."""
+    m = mujoco.MjModel.from_xml_string(HINGE_XML)
+    d = mujoco.MjData(m)
+    soles, feet = [m.site("sole_r").id, m.site("sole_l").id], [m.body("foot_r").id,
+                                                               m.body("foot_l").id]
+    qpos, qvel, qacc = _random_state(m, np.random.default_rng(3))
+    qpos[:3] = 0.0
+    a2 = m.joint("a2").id
+    qpos[m.jnt_qposadr[a2]], qvel[m.jnt_dofadr[a2]], qacc[m.jnt_dofadr[a2]] = 0.0, 0.0, 0.0
+    _, ground, _ = _hinge_kernel(m, qpos, qvel, qacc, soles, feet, (1.0, 0.0), False, (a2,))
+    _, alone, _ = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet)
+    assert np.abs(ground[0] - alone[0]).max() < 1e-9 * max(1.0, np.abs(alone).max())
+
+
+def test_hinge_tree_declines_other_joints() -> None:
+    """Ball and slide joints are not a hinge tree: the caller keeps MuJoCo's arithmetic."""
+    from grfguard.kernels.rne import HingeTree
+
+    m = mujoco.MjModel.from_xml_string(BALL_SLIDE_XML)
+    assert HingeTree.from_mujoco(m, {}, [m.site("tip").id], [m.body("leg").id]) is None

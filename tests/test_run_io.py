@@ -14,7 +14,12 @@ from grfguard.cli import run_log
 from grfguard.detect.monitor import Monitor
 from grfguard.faults import inject_faults, parse_fault_spec
 from grfguard.guard import SYSTEM_STATES
-from grfguard.io.codes import codes_to_categorical, codes_to_str, strings_to_str
+from grfguard.io.codes import (
+    codes_to_arrow,
+    codes_to_categorical,
+    codes_to_str,
+    strings_to_str,
+)
 from grfguard.io.logio import read_log, write_log
 from grfguard.io.runwriter import write_run
 from grfguard.kernels.detect import KIND_NAMES
@@ -57,6 +62,26 @@ def test_codes_to_str_equals_python_strings() -> None:
         codes_to_str(np.array([-1]), SYSTEM_STATES)
 
 
+@pytest.mark.parametrize("code", range(len(KIND_NAMES)))
+def test_one_code_columns_equal_python_strings(code) -> None:
+    """A column of one code (built from its buffers, not by ``take``), for every name,
+    also the empty one, and a column mixing codes: the Arrow array of Python strings."""
+    import pyarrow as pa
+
+    names = (*KIND_NAMES, "", "drölf")
+    for codes in (np.full(1000, code), np.full(3, len(names) - 2), np.full(3, len(names) - 1),
+                  np.array([code, 0, len(names) - 1]), np.zeros(0, dtype=np.int64)):
+        ref = pa.array([names[int(c)] for c in codes], type=pa.large_string())
+        got = codes_to_arrow(codes.astype(float), names)
+        got.validate(full=True)
+        assert got.equals(ref)
+        if codes.size:  # (pandas types an empty column of objects as object)
+            ref_pd = pd.Series(np.array(names, dtype=object)[codes.astype(np.int64)])
+            pd.testing.assert_series_equal(pd.Series(codes_to_str(codes, names)), ref_pd)
+    with pytest.raises(IndexError):
+        codes_to_arrow(np.full(4, len(names)), names)
+
+
 def test_zero_copy_read_equals_the_copying_read(bad_walk) -> None:
     path, _ = bad_walk
     ref = read_log(path)
@@ -90,7 +115,8 @@ def test_written_logs_round_trip_with_split_floats(tmp_path) -> None:
     enc = {meta.column(i).path_in_schema: meta.column(i).encodings
            for i in range(meta.num_columns)}
     assert "BYTE_STREAM_SPLIT" in enc["x"] and "BYTE_STREAM_SPLIT" in enc["f32"]
-    assert "RLE_DICTIONARY" in enc["s"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert "RLE_DICTIONARY" in enc["k"] and "BYTE_STREAM_SPLIT" not in enc["k"]
+    assert "RLE_DICTIONARY" not in enc["s"] and "PLAIN" in enc["s"]  # text: plain + zstd
     assert meta.column(0).compression == "ZSTD"
     assert meta.column(0).is_stats_set and not meta.column(1).is_stats_set  # time only
 
@@ -212,3 +238,32 @@ def test_for_log_warm_false_leaves_the_kernels_to_their_first_call(bad_walk,
     assert calls == [1]
     out = cold.run(log)
     assert len(out) == len(log) and "system_state" in out
+
+
+def test_run_log_loads_the_kernel_without_scipy_linalg(bad_walk, tmp_path) -> None:
+    """numba's BLAS check at the first kernel load is served without importing the
+    scipy.linalg package (grfguard.cli._blas_probe_without_scipy_linalg), the paper's
+    observer solves its Riccati equation only when used; afterwards scipy.linalg imports
+    as usual and numba's linear algebra works."""
+    import subprocess
+    import sys
+
+    path, _ = bad_walk
+    code = (
+        "import sys; from pathlib import Path; import grfguard.cli as cli\n"
+        "n = cli.run_log(Path(sys.argv[1]), Path(sys.argv[2]))\n"
+        "print(n, 'scipy.linalg' in sys.modules, 'numba.np.arraymath' in sys.modules,\n"
+        "      any(m.startswith('scipy.linalg.') for m in sys.modules))\n"
+        "import numba, numpy as np, scipy.linalg\n"
+        "print(float(scipy.linalg.solve([[2.0]], [4.0])[0]),\n"
+        "      hasattr(scipy.linalg, 'cython_blas'),\n"
+        "      float(numba.njit(lambda a: np.dot(a, a))(np.ones(3))))\n"
+    )
+    out = tmp_path / "out.parquet"
+    res = subprocess.run([sys.executable, "-c", code, str(path), str(out)],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    first, second = res.stdout.split("\n")[:2]
+    assert first.split()[1:] == ["False", "True", "False"], first
+    assert second.split() == ["2.0", "True", "3.0"], second
+    assert int(first.split()[0]) == len(read_log(out))

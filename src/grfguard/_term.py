@@ -8,7 +8,6 @@ from collections.abc import Callable
 from typing import Any
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from grfguard._cliutil import friendly, say
 
@@ -27,8 +26,17 @@ def cli_say(message: str) -> None:
     say(console, message)
 
 
-def progress(description: str) -> Progress:
-    """A progress bar on stderr, shown only on a terminal."""
+def progress(description: str) -> Any:
+    """A progress bar on stderr (a :class:`rich.progress.Progress`), shown only on a
+    terminal (``rich.progress`` is imported here: most commands draw no bar)."""
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
     return Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),

@@ -73,15 +73,30 @@ def quat_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
 
 
 def rotation_to_quat(R: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) ``w, x, y, z`` with ``w >= 0`` from rotations (..., 3, 3)."""
+    """Unit quaternions (..., 4) ``w, x, y, z`` with ``w >= 0`` from rotations (..., 3, 3).
+
+    Shepperd's method: the largest of ``|w|, |x|, |y|, |z|`` from the diagonal (a square
+    root of a number of at least 1), the three others from sums and differences of
+    off-diagonal entries divided by it. Accurate to a few units in the last place for
+    every rotation (a square root per component, as before, turned a rounding error of
+    1e-16 in a near-zero component into about 1e-8)."""
     R = np.asarray(R, dtype=float)
-    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
-    w = 0.5 * np.sqrt(np.maximum(0.0, 1 + m00 + m11 + m22))
-    x = 0.5 * np.sqrt(np.maximum(0.0, 1 + m00 - m11 - m22))
-    y = 0.5 * np.sqrt(np.maximum(0.0, 1 - m00 + m11 - m22))
-    z = 0.5 * np.sqrt(np.maximum(0.0, 1 - m00 - m11 + m22))
-    x = np.copysign(x, R[..., 2, 1] - R[..., 1, 2])
-    y = np.copysign(y, R[..., 0, 2] - R[..., 2, 0])
-    z = np.copysign(z, R[..., 1, 0] - R[..., 0, 1])
-    q = np.stack([w, x, y, z], -1)
+    m00, m01, m02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
+    m10, m11, m12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
+    m20, m21, m22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    d = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22,
+                  1 - m00 - m11 + m22], -1)
+    k = np.argmax(d, axis=-1)
+    big = 0.5 * np.sqrt(np.maximum(np.take_along_axis(d, k[..., None], -1)[..., 0], 1e-300))
+    f = 0.25 / big
+    # column i: 4 q_k q_i for the largest component k (rows: k = w, x, y, z)
+    wx, wy, wz = m21 - m12, m02 - m20, m10 - m01
+    xy, xz, yz = m01 + m10, m02 + m20, m12 + m21
+    q = np.stack([
+        np.choose(k, [big / f, wx, wy, wz]) * f,
+        np.choose(k, [wx, big / f, xy, xz]) * f,
+        np.choose(k, [wy, xy, big / f, yz]) * f,
+        np.choose(k, [wz, xz, yz, big / f]) * f,
+    ], -1)
+    q = np.where(q[..., :1] < 0, -q, q)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)

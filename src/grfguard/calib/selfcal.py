@@ -23,7 +23,12 @@ Uses only the redundancy of fault-free walking (no simulation truth):
   averages; the moving centre of pressure makes the eight ``w_i`` identifiable. Without a
   measured mass only the products ``k_i m`` are known: the gains are normalized to mean 1
   and the mass becomes the weight the load cells see; with ``measured_mass_kg``,
-  ``k_i = 1 / (w_i m)``.
+  ``k_i = 1 / (w_i m)``. A flat sole's load is planar, so a walk leaves each sole's twist
+  of gains (corners 1, 4 against 2, 3) to a ridge; data with calibration poses
+  (``GaitConfig.calibration_poses``: a sole standing on one corner) pin it: standing-still
+  samples (:func:`_still`, encoders only) are then exact rows (``a_z = 0``), see
+  :func:`_posed_static_rows`, and posed soles are left out of the flat-sole fits
+  (:func:`_soles_parallel`).
 * **Trunk CoM** (horizontal): the time average of the ZMP equals that of the CoM
   (the mean horizontal acceleration of a walk from rest to rest is zero), so the mean of
   ``CoP - CoM_model`` (corrected forces and attitude, trunk-yaw frame) is

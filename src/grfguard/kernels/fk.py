@@ -22,9 +22,12 @@ from grfguard.errors import ConfigError
 from grfguard.kernels._jit import borrow, njit, njit_nort, view1d, view2d
 
 __all__ = ["TreeModel", "fk_tree", "fk_bodies", "fk_sites", "fk_site_pos", "subtree_com_of",
-           "fk_batch", "N_WORK", "FREE", "BALL", "SLIDE", "HINGE"]
+           "fk_batch", "fk_bodies_kind", "N_WORK", "FREE", "BALL", "SLIDE", "HINGE",
+           "GENERIC"]
 
 FREE, BALL, SLIDE, HINGE = 0, 1, 2, 3
+#: Body kind of :meth:`TreeModel.body_kinds`: any joints, offsets and rotations.
+GENERIC = -1
 _MINVAL = 1e-15
 #: Scratch floats :func:`fk_tree` needs.
 N_WORK = 27
@@ -120,6 +123,24 @@ class TreeModel:
             self.jnt_type, self.jnt_qposadr, self.jnt_axis, self.jnt_pos, self.qpos0,
             self.body_order,
         )
+
+    def body_kinds(self) -> np.ndarray:
+        """Per body (nb,) int64: :data:`GENERIC` (-1), or the axis index 0/1/2 of a body
+        with one hinge about the unit axis x/y/z, no rotation relative to its parent
+        (``body_quat`` = 1) and its anchor at the body origin (``jnt_pos`` = 0): for
+        those :func:`fk_bodies_kind` leaves out the products with the zeros (same values
+        as :func:`fk_bodies` up to the sign of zeros)."""
+        kinds = np.full(self.nbody, GENERIC, np.int64)
+        for i in range(1, self.nbody):
+            j = int(self.body_jntadr[i])
+            if (self.body_jntnum[i] != 1 or self.jnt_type[j] != HINGE
+                    or not np.array_equal(self.body_quat[i], [1.0, 0.0, 0.0, 0.0])
+                    or np.any(self.jnt_pos[j] != 0.0)):
+                continue
+            for k in range(3):
+                if np.array_equal(self.jnt_axis[j], np.eye(3)[k]):
+                    kinds[i] = k
+        return kinds
 
     def new_frames(self) -> tuple[np.ndarray, ...]:
         """Output arrays ``(xpos, xquat, xmat, xipos, ximat, subtree_com)`` for one sample."""
@@ -274,72 +295,131 @@ def fk_bodies(qpos_in, body_parent, body_jntadr, body_jntnum, body_sameframe, bo
     _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
     _world_frame(xpos, xquat, xmat, xipos, ximat)
     for n in range(nb - 1):
-        i = body_order[n]
-        ja = body_jntadr[i]
-        if body_jntnum[i] == 1 and jnt_type[ja] == FREE:
-            a = jnt_qposadr[ja]
-            p0, p1, p2 = qpos[a], qpos[a + 1], qpos[a + 2]
-            q0, q1, q2, q3 = qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6]
-        else:
-            p = body_parent[i]
-            v0, v1, v2 = _mv(xmat[p, 0], xmat[p, 1], xmat[p, 2], xmat[p, 3], xmat[p, 4],
-                             xmat[p, 5], xmat[p, 6], xmat[p, 7], xmat[p, 8],
-                             body_pos[i, 0], body_pos[i, 1], body_pos[i, 2])
-            p0 = xpos[p, 0] + v0
-            p1 = xpos[p, 1] + v1
-            p2 = xpos[p, 2] + v2
-            q0, q1, q2, q3 = _mq(xquat[p, 0], xquat[p, 1], xquat[p, 2], xquat[p, 3],
-                                 body_quat[i, 0], body_quat[i, 1], body_quat[i, 2],
-                                 body_quat[i, 3])
-            for jj in range(body_jntnum[i]):
-                j = ja + jj
-                a = jnt_qposadr[j]
-                t = jnt_type[j]
-                j0, j1, j2 = jnt_pos[j, 0], jnt_pos[j, 1], jnt_pos[j, 2]
-                a0, a1, a2 = _rv(j0, j1, j2, q0, q1, q2, q3)
-                a0 = a0 + p0
-                a1 = a1 + p1
-                a2 = a2 + p2
-                if t == SLIDE:
-                    v0, v1, v2 = _rv(jnt_axis[j, 0], jnt_axis[j, 1], jnt_axis[j, 2], q0, q1,
-                                     q2, q3)
-                    sl = qpos[a] - qpos0[a]
-                    p0 = p0 + v0 * sl
-                    p1 = p1 + v1 * sl
-                    p2 = p2 + v2 * sl
-                else:
-                    if t == BALL:
-                        l0, l1, l2, l3 = qpos[a], qpos[a + 1], qpos[a + 2], qpos[a + 3]
-                    else:
-                        ang = qpos[a] - qpos0[a]
-                        if ang == 0:
-                            l0, l1, l2, l3 = 1.0, 0.0, 0.0, 0.0
-                        else:
-                            sn = math.sin(ang * 0.5)
-                            l0 = math.cos(ang * 0.5)
-                            l1 = jnt_axis[j, 0] * sn
-                            l2 = jnt_axis[j, 1] * sn
-                            l3 = jnt_axis[j, 2] * sn
-                    q0, q1, q2, q3 = _mq(q0, q1, q2, q3, l0, l1, l2, l3)
-                    v0 = a0 - p0
-                    v1 = a1 - p1
-                    v2 = a2 - p2
-                    w0, w1, w2 = _rv(j0, j1, j2, q0, q1, q2, q3)
-                    p0 += v0 - w0
-                    p1 += v1 - w1
-                    p2 += v2 - w2
-        q0, q1, q2, q3 = _nqf(q0, q1, q2, q3)
-        xquat[i, 0] = q0
-        xquat[i, 1] = q1
-        xquat[i, 2] = q2
-        xquat[i, 3] = q3
-        xpos[i, 0] = p0
-        xpos[i, 1] = p1
-        xpos[i, 2] = p2
-        r = _q2m(q0, q1, q2, q3)
-        for k in range(9):
-            xmat[i, k] = r[k]
+        _generic_body(body_order[n], qpos, body_parent, body_jntadr, body_jntnum, body_pos,
+                      body_quat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, xpos, xquat,
+                      xmat)
     _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat)
+
+
+@njit_nort(inline="always")
+def _generic_body(i, qpos, body_parent, body_jntadr, body_jntnum, body_pos, body_quat,
+                  jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, xpos, xquat, xmat):
+    """mj_kinematics of body ``i`` (its parent done): any joints, offsets, rotations."""
+    ja = body_jntadr[i]
+    if body_jntnum[i] == 1 and jnt_type[ja] == FREE:
+        a = jnt_qposadr[ja]
+        p0, p1, p2 = qpos[a], qpos[a + 1], qpos[a + 2]
+        q0, q1, q2, q3 = qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6]
+    else:
+        p = body_parent[i]
+        v0, v1, v2 = _mv(xmat[p, 0], xmat[p, 1], xmat[p, 2], xmat[p, 3], xmat[p, 4],
+                         xmat[p, 5], xmat[p, 6], xmat[p, 7], xmat[p, 8],
+                         body_pos[i, 0], body_pos[i, 1], body_pos[i, 2])
+        p0 = xpos[p, 0] + v0
+        p1 = xpos[p, 1] + v1
+        p2 = xpos[p, 2] + v2
+        q0, q1, q2, q3 = _mq(xquat[p, 0], xquat[p, 1], xquat[p, 2], xquat[p, 3],
+                             body_quat[i, 0], body_quat[i, 1], body_quat[i, 2],
+                             body_quat[i, 3])
+        for jj in range(body_jntnum[i]):
+            j = ja + jj
+            a = jnt_qposadr[j]
+            t = jnt_type[j]
+            j0, j1, j2 = jnt_pos[j, 0], jnt_pos[j, 1], jnt_pos[j, 2]
+            a0, a1, a2 = _rv(j0, j1, j2, q0, q1, q2, q3)
+            a0 = a0 + p0
+            a1 = a1 + p1
+            a2 = a2 + p2
+            if t == SLIDE:
+                v0, v1, v2 = _rv(jnt_axis[j, 0], jnt_axis[j, 1], jnt_axis[j, 2], q0, q1,
+                                 q2, q3)
+                sl = qpos[a] - qpos0[a]
+                p0 = p0 + v0 * sl
+                p1 = p1 + v1 * sl
+                p2 = p2 + v2 * sl
+            else:
+                if t == BALL:
+                    l0, l1, l2, l3 = qpos[a], qpos[a + 1], qpos[a + 2], qpos[a + 3]
+                else:
+                    ang = qpos[a] - qpos0[a]
+                    if ang == 0:
+                        l0, l1, l2, l3 = 1.0, 0.0, 0.0, 0.0
+                    else:
+                        sn = math.sin(ang * 0.5)
+                        l0 = math.cos(ang * 0.5)
+                        l1 = jnt_axis[j, 0] * sn
+                        l2 = jnt_axis[j, 1] * sn
+                        l3 = jnt_axis[j, 2] * sn
+                q0, q1, q2, q3 = _mq(q0, q1, q2, q3, l0, l1, l2, l3)
+                v0 = a0 - p0
+                v1 = a1 - p1
+                v2 = a2 - p2
+                w0, w1, w2 = _rv(j0, j1, j2, q0, q1, q2, q3)
+                p0 += v0 - w0
+                p1 += v1 - w1
+                p2 += v2 - w2
+    _store_body(i, p0, p1, p2, q0, q1, q2, q3, xpos, xquat, xmat)
+
+
+@njit_nort(inline="always")
+def _unit_hinge(k, q0, q1, q2, q3, sn, cs):
+    """mju_mulQuat(q, (cs, sn e_k)) for the unit axis ``e_k`` without the products with
+    its zeros (each component is MuJoCo's sum with the zero terms left out: the same
+    value, up to the sign of a zero)."""
+    if k == 0:
+        return q0 * cs - q1 * sn, q0 * sn + q1 * cs, q2 * cs + q3 * sn, q3 * cs - q2 * sn
+    if k == 1:
+        return q0 * cs - q2 * sn, q1 * cs - q3 * sn, q0 * sn + q2 * cs, q1 * sn + q3 * cs
+    return q0 * cs - q3 * sn, q1 * cs + q2 * sn, q2 * cs - q1 * sn, q0 * sn + q3 * cs
+
+
+@njit_nort(inline="always")
+def fk_bodies_kind(qpos_in, body_kind, body_parent, body_jntadr, body_jntnum, body_sameframe,
+                   body_pos, body_quat, body_ipos, body_iquat, jnt_type, jnt_qposadr,
+                   jnt_axis, jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos,
+                   ximat):
+    """:func:`fk_bodies` with the bodies of :meth:`TreeModel.body_kinds` >= 0 (a unit
+    hinge at the body origin, no body rotation) done without the products with zeros;
+    the same values (tests: ``tests/test_kernels_fk.py``)."""
+    nb = body_parent.shape[0]
+    _normalized_qpos(qpos_in, qpos, jnt_type, jnt_qposadr)
+    _world_frame(xpos, xquat, xmat, xipos, ximat)
+    for n in range(nb - 1):
+        i = body_order[n]
+        k = body_kind[i]
+        if k < 0:
+            _generic_body(i, qpos, body_parent, body_jntadr, body_jntnum, body_pos, body_quat,
+                          jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, xpos, xquat, xmat)
+            continue
+        p = body_parent[i]
+        v0, v1, v2 = _mv(xmat[p, 0], xmat[p, 1], xmat[p, 2], xmat[p, 3], xmat[p, 4],
+                         xmat[p, 5], xmat[p, 6], xmat[p, 7], xmat[p, 8],
+                         body_pos[i, 0], body_pos[i, 1], body_pos[i, 2])
+        q0, q1, q2, q3 = xquat[p, 0], xquat[p, 1], xquat[p, 2], xquat[p, 3]
+        a = jnt_qposadr[body_jntadr[i]]
+        ang = qpos[a] - qpos0[a]
+        if ang != 0:
+            q0, q1, q2, q3 = _unit_hinge(k, q0, q1, q2, q3, math.sin(ang * 0.5),
+                                         math.cos(ang * 0.5))
+        _store_body(i, xpos[p, 0] + v0, xpos[p, 1] + v1, xpos[p, 2] + v2, q0, q1, q2, q3,
+                    xpos, xquat, xmat)
+    _inertial_frames(body_sameframe, body_ipos, body_iquat, xpos, xquat, xmat, xipos, ximat)
+
+
+@njit_nort(inline="always")
+def _store_body(i, p0, p1, p2, q0, q1, q2, q3, xpos, xquat, xmat):
+    """Normalise the orientation (mju_normalize4) and store the body's frame."""
+    q0, q1, q2, q3 = _nqf(q0, q1, q2, q3)
+    xquat[i, 0] = q0
+    xquat[i, 1] = q1
+    xquat[i, 2] = q2
+    xquat[i, 3] = q3
+    xpos[i, 0] = p0
+    xpos[i, 1] = p1
+    xpos[i, 2] = p2
+    r = _q2m(q0, q1, q2, q3)
+    for k in range(9):
+        xmat[i, k] = r[k]
 
 
 @njit_nort(inline="always")

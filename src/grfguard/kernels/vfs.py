@@ -47,8 +47,14 @@ from grfguard.io.schema import (
     ZMP_REF,
 )
 from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
-from grfguard.kernels.fk import TreeModel, fk_bodies, fk_site_pos, fk_sites, subtree_com_of
-from grfguard.kernels.nnls import prior_qp
+from grfguard.kernels.fk import (
+    TreeModel,
+    fk_bodies_kind,
+    fk_site_pos,
+    fk_sites,
+    subtree_com_of,
+)
+from grfguard.kernels.nnls import prior_qp_warm
 from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     N_XSTATE,
     P_COM_PAPER,
@@ -108,6 +114,9 @@ _S_PREVF, _S_PREVL_OK, _S_PREVL = 29, 30, 31  # prev_L: 31..33
 _S_LP_OK, _S_FUSE_OK, _S_ACC_OK = 34, 35, 36
 _S_LAST, _S_HAS_LAST = 37, 59  # last output 37..58
 _S_FIXED = 60
+# int scratch (iws): 0..31 contact and solver indices, 32..42 the sites, then the QP's
+# starting guess (contact pattern, positive corners)
+_IW_WARM = 44
 
 
 def _state_size(nbr: int, order: int) -> int:
@@ -271,7 +280,7 @@ def _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x
         _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
         _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
                      qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8),
-                     tail, F2, zmp0, zmp1)
+                     tail, F2, zmp0, zmp1, view1d(iws, _IW_WARM, 2))
     _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
 
 
@@ -440,7 +449,8 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     """Forward kinematics with the trunk at the origin: bodies, IMU/corner/sole sites,
     corner contact points ``pk`` [m]; returns the trunk-relative CoM (3 floats) [m]."""
     (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat, body_ipos,
-     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order) = tree
+     body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order,
+     body_kind) = tree
     site_body, site_sameframe, site_pos, site_quat = sites
     qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
     tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
@@ -463,9 +473,9 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
     for j in range(_NJ):
         qin[iprm[_IP_JOINTS + j]] = x[_I_Q + j]
     # fk_tree's bodies, then the subtree CoM of the trunk only (same bits)
-    fk_bodies(qin, body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
-              body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-              body_order, qpos, xpos, xquat, xmat, xipos, ximat)
+    fk_bodies_kind(qin, body_kind, body_parent, body_jntadr, body_jntnum, body_sameframe,
+                   body_pos, body_quat, body_ipos, body_iquat, jnt_type, jnt_qposadr, jnt_axis,
+                   jnt_pos, qpos0, body_order, qpos, xpos, xquat, xmat, xipos, ximat)
     sel[0] = iprm[_IP_IMU]
     for k in range(8):
         sel[1 + k] = iprm[_IP_CORNERS + k]
@@ -766,9 +776,12 @@ def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
 
 @njit_nort
 def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
-                 qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1):
+                 qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1, warm):
     """Compliance prior + QP: the corner forces ``forces`` [N] (0 off contact, NaN if an
-    input is not finite) summing to ``F2`` with their CoP at the ZMP."""
+    input is not finite) summing to ``F2`` with their CoP at the ZMP. ``warm`` (2 ints,
+    scratch): the contact pattern and the positive corners of the last solve, the QP's
+    starting guess (:func:`grfguard.kernels.nnls.prior_qp_warm`; the bits do not depend
+    on it)."""
     cnt = 0
     for k in range(8):
         cnt += ctc[k]
@@ -805,8 +818,8 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
         for c in range(m):
             relc[c, 0] = rel8[cidx[c], 0]
             relc[c, 1] = rel8[cidx[c], 1]
-        prior_qp(relc, tmp8, F2, prm[_P_SW], m, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
-                 qp_dots)
+        _warm_qp(ctc, cidx, m, relc, tmp8, F2, prm[_P_SW], qp_x, qp_z, qp_free, qp_isfree, qp_M,
+                 qp_rhs, qp_dots, warm)
         if m == 8:
             sx = _sum8(qp_x)
         else:
@@ -817,6 +830,30 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
                 qp_x[c] = qp_x[c] * f
         for c in range(m):
             forces[cidx[c]] = qp_x[c]
+
+
+@njit_nort(inline="always")
+def _warm_qp(ctc, cidx, m, relc, prior, F2, sw, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
+             qp_dots, warm):
+    """:func:`prior_qp_warm` on the ``m`` corners in contact (``cidx``), guessing the
+    last solve's positive corners when the contact pattern is the same."""
+    pat = 0
+    for k in range(8):
+        if ctc[k]:
+            pat |= 1 << k
+    guess = 0
+    if warm[0] == pat:
+        for c in range(m):
+            if (warm[1] >> cidx[c]) & 1:
+                guess |= 1 << c
+    mask = prior_qp_warm(relc, prior, F2, sw, m, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
+                         qp_dots, guess)
+    pos = 0
+    for c in range(m):
+        if (mask >> c) & 1:
+            pos |= 1 << cidx[c]
+    warm[0] = pat
+    warm[1] = pos
 
 
 @njit_nort(inline="always")
@@ -908,9 +945,11 @@ def _unpack(cf, ci):
     site_sameframe = view1d(ci, i, ns)
     i += ns
     body_order = view1d(ci, i, nb - 1)
+    i += nb - 1
+    body_kind = view1d(ci, i, nb)
     tree = (body_parent, body_jntadr, body_jntnum, body_sameframe, body_pos, body_quat,
             body_ipos, body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0,
-            body_order)
+            body_order, body_kind)
     sites = (site_body, site_sameframe, site_pos, site_quat)
     return prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites
 
@@ -1181,6 +1220,7 @@ class VFSKernel:
         self.ci = np.ascontiguousarray(np.concatenate([
             header, ip, tm.body_parent, tm.body_jntadr, tm.body_jntnum, tm.body_sameframe,
             tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe, tm.body_order,
+            tm.body_kinds(),
         ]), dtype=np.int64)
         self._entry = None
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
