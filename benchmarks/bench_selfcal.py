@@ -88,10 +88,10 @@ READING = (
     "residual split into each sole's total, pitch, roll and twist): the error is mostly "
     "the sole's roll (the lateral ZMP), late: the twin's 10 Hz Butterworth delays the CoM"
     " acceleration by about 22 ms, and the same residual with the sensor's corner forces "
-    'advanced 10 / 20 ms is 0.584 / 0.536 (1.93x / 1.78x; advancing the accelerometer-'
-    "fused exact model's does not help, 0.320). Second, a sole twist the sensor gets "
-    'wrong (about 20 N RMS, from the encoder offsets left after calibration; the encoder '
-    'gap alone, uncalibrated, 56 N): with the true twist 0.645 (2.14x). Settings of the '
+    'advanced 10 / 20 ms is 0.584 / 0.536 (1.93x / 1.78x; the accelerometer-fused exact '
+    "model's advanced alike: 0.278 / 0.320). Second, a sole twist the sensor gets wrong "
+    '(about 20 N RMS, from the encoder offsets left after calibration; the encoder gap '
+    'alone, uncalibrated, 56 N): with the true twist 0.645 (2.14x). Settings of the '
     'accelerometer-free sensor (robot; vibrating IMU): Butterworth 10 Hz 0.715; 0.630 '
     '(kept), 8 Hz 0.782, 9 Hz 0.740, 11 Hz 0.712; 0.636, third order 10 Hz 0.848, 14 Hz '
     '0.726; 1.216, the pendulum Kalman ZMP 0.727; 0.754 (`com_acc_psd` 1: 0.774; 0.510), '
