@@ -36,3 +36,37 @@ def test_monitor_run_and_update_match_python_monitor():
         o = mon.update(r)
         for c in ("vfs_r1", "vfs_l4", "flag_r2"):
             assert o[c] == out[c].iloc[k] or abs(o[c] - out[c].iloc[k]) <= 1e-12, (k, c)
+
+
+def test_batch_loop_writes_any_memory_order_in_place():
+    """``monitor_run_packed`` reads the input and writes the outputs in any memory order
+    (row-major, column-major, a strided chunk of a larger array, read-only input) with
+    the same bits as row-by-row ``MonitorKernel.step``, with a time gap and missing
+    joints inside."""
+    from grfguard.kernels.monitor import N_EX, monitor_run_packed
+
+    walk = simulate(SURALP, GaitConfig(duration=3.0), NoiseConfig(), seed=7)
+    log = inject_faults(walk, "r2=offset:150@1")
+    log.loc[1200:1219, "q_r_knee"] = np.nan
+    log.loc[2000:, "time"] += 0.05
+    mon = Monitor.for_log(log)
+    k = mon._kernel(True, True)
+    n = len(log) - 5
+    X = np.ascontiguousarray(np.column_stack([
+        log[c].to_numpy(float) if c in log else np.full(len(log), np.nan) for c in k.in_cols
+    ]))[:n]
+    k.reset()
+    ref = np.array([k.step(X[i].copy(), np.empty(len(k.out_cols))).copy() for i in range(n)])
+    m = len(k.out_cols)
+    ro = X.copy()
+    ro.flags.writeable = False
+    big = np.full((m + 3, n + 9), -7.0)
+    for Xin, Y in ((X, np.empty((n, m))), (np.asfortranarray(X), np.empty((n, m), order="F")),
+                   (ro, big[1:m + 1, 4:n + 4].T)):
+        EX = np.empty((n, N_EX))
+        k.reset()
+        monitor_run_packed(Xin, Y, EX, k.F, k.I)
+        assert np.array_equal(Y.view(np.int64), ref.view(np.int64))
+    assert (big[0] == -7.0).all() and (big[m + 1:] == -7.0).all()  # nothing written outside
+    assert (big[:, :4] == -7.0).all() and (big[:, n + 4:] == -7.0).all()
+    assert (ref[:, k.out_cols.index("system_state")] != 0).any()  # the gap and NaNs seen

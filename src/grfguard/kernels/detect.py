@@ -207,6 +207,37 @@ def new_state() -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------- exact sums
 @njit_nort
 def _fsum(vals, n, part):
+    """``math.fsum(vals[:n])`` for finite values; ``part`` is scratch of at least ``n``
+    floats.
+
+    Fast path: the running sum ``s`` with the exact error of every addition (TwoSum),
+    the errors summed the same way; when no error of that second sum is lost, ``s + c``
+    equals the exact sum and one rounding of it is the correctly rounded sum, which is
+    what ``math.fsum`` returns. Otherwise (errors of very different magnitudes, a zero
+    result, not finite) :func:`_fsum_exact`."""
+    if n < 2:
+        return _fsum_exact(vals, n, part)
+    s = vals[0]
+    c = 0.0
+    lost = 0.0
+    for k in range(1, n):
+        x = vals[k]
+        t = s + x
+        bp = t - s
+        e = (s - (t - bp)) + (x - bp)
+        s = t
+        u = c + e
+        bq = u - c
+        lost += abs((c - (u - bq)) + (e - bq))
+        c = u
+    r = s + c
+    if lost != 0.0 or r == 0.0 or not math.isfinite(r):
+        return _fsum_exact(vals, n, part)
+    return r
+
+
+@njit_nort
+def _fsum_exact(vals, n, part):
     """``math.fsum(vals[:n])`` (Shewchuk's algorithm with CPython's final rounding) for
     finite values; ``part`` is scratch of at least ``n`` floats."""
     m = 0

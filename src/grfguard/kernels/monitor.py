@@ -139,14 +139,13 @@ def output_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]
 def _input_guard(xin, xc, mp, lims):
     """``InputGuard.clean_row``: ``xc`` = ``xin`` with implausible values NaN; True when
     something was rejected."""
-    rejected = False
-    for j in range(xin.shape[0]):
+    bad = 0
+    for j in range(xin.shape[0]):  # branch-free (most columns are in range)
         q = xin[j]
-        if not math.isnan(q) and not (lims[0, j] <= q and q <= lims[1, j]):
-            xc[j] = math.nan
-            rejected = True
-        else:
-            xc[j] = q
+        out = not math.isnan(q) and not (lims[0, j] <= q and q <= lims[1, j])
+        xc[j] = math.nan if out else q
+        bad += 1 if out else 0
+    rejected = bad != 0
     qi = int(mp[_M_QIDX])
     if mp[_M_REJECT] != 0.0 and qi >= 0:
         nrm = math.sqrt(0.0 + xin[qi] * xin[qi] + xin[qi + 1] * xin[qi + 1]
@@ -282,7 +281,7 @@ def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, v
         vstate[_S_HN] = 0.0
         vstate[_S_PREVF] = 0.0
         vstate[_S_PREVL_OK] = 0.0
-    share = son and mode == 1.0 and sys_twin_prepare(sysp, reset, vstate, qstate, ci)
+    share = son and mode == 1.0 and sys_twin_prepare(sysp, syss, reset, vstate, qstate, ci)
     valid = _estimate(xin, xc, mode, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy)
     if son:
         valid = sys_twin(sysp, syss, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws,
@@ -374,6 +373,8 @@ class MonitorKernel:
         self.ex = np.zeros(N_EX)
         self.xbuf = np.zeros(n_in)
         self.ybuf = np.zeros(len(self.out_cols))
+        self.xrow = np.zeros(n_in)  # the batch loop's row buffers (monitor_run_packed)
+        self.yrow = np.zeros(len(self.out_cols))
         self.sin = (n_in,)
         self.sout = (len(self.out_cols),)
         self._pack()
@@ -407,7 +408,7 @@ class MonitorKernel:
     # Every array of the step lives in two buffers (floats F, ints I) so that a call from
     # Python converts four arguments, not eighteen (about 2 us less per sample).
     _F_PARTS = ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "vstate", "cf", "vws",
-                "xc", "vy", "ws", "sysp", "syss", "qstate", "qcf", "qws", "qy")
+                "xc", "vy", "ws", "sysp", "syss", "qstate", "qcf", "qws", "qy", "xrow", "yrow")
 
     def _parts(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         vstate, cf, ci, vws, viws = self.vfs_args()
@@ -441,7 +442,7 @@ class MonitorKernel:
         views["lims"] = views["lims"].reshape(2, len(self.in_cols))
         views["ss"] = views["ss"].reshape(self.ss.shape)
         for n in ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "xc", "vy", "ws", "sysp",
-                  "syss", "qstate", "qcf", "qws", "qy"):
+                  "syss", "qstate", "qcf", "qws", "qy", "xrow", "yrow"):
             setattr(self, n, views[n])
         k = 2 * len(self._F_PARTS) + 1
         ci = self.I[h[k]:h[k] + h[k + 1]]
@@ -499,7 +500,7 @@ class MonitorKernel:
         n = X.shape[0]
         Y = np.empty((n, len(self.out_cols)))
         EX = np.empty((n, N_EX))
-        monitor_run_packed(np.ascontiguousarray(X, dtype=float), Y, EX, self.F, self.I)
+        monitor_run_packed(np.asarray(X, dtype=float), Y, EX, self.F, self.I)
         return Y, EX
 
 
@@ -542,12 +543,68 @@ def monitor_step_packed(x, y, F, I):
 
 
 @njit_nort
-def monitor_run_packed(X, Y, EX, F, I):
-    """:func:`monitor_step_packed` over every row of ``X`` (the batch path)."""
+def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I):
+    """:func:`monitor_step` over ``n`` rows read from and written to flat buffers: input
+    value ``(k, j)`` at ``Xf[xo + k xrs + j xcs]``, output ``(k, j)`` at
+    ``Yf[yo + k yrs + j ycs]`` (any memory order: no copy of the chunk before or after),
+    the extras into ``EX[k]``; each row goes through the kernel's row buffers."""
     ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
-    for k in range(X.shape[0]):
-        monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
+    xrow = F[I[40]:I[40] + I[41]]
+    yrow = F[I[42]:I[42] + I[43]]
+    n_in = xrow.shape[0]
+    m = yrow.shape[0]
+    for k in range(n):
+        b = xo + k * xrs
+        for j in range(n_in):
+            xrow[j] = Xf[b + j * xcs]
+        monitor_step(xrow, yrow, EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
                      viws, xc, vy, ws, sy)
+        b = yo + k * yrs
+        for j in range(m):
+            Yf[b + j * ycs] = yrow[j]
+
+
+def _flat(A: np.ndarray) -> tuple[np.ndarray, int, int] | None:
+    """A 2-D float64 array as ``(flat, row stride, column stride)``: a 1-D view over its
+    memory from its first element (strides in elements); None when that is not possible
+    (negative or odd strides, read-only memory, other dtype)."""
+    if A.dtype != np.float64 or A.ndim != 2 or not A.flags.writeable or A.size == 0:
+        return None
+    s0, s1 = A.strides
+    if s0 < 0 or s1 < 0 or s0 % 8 or s1 % 8:
+        return None
+    r, c = s0 // 8, s1 // 8
+    span = (A.shape[0] - 1) * r + (A.shape[1] - 1) * c + 1
+    return np.lib.stride_tricks.as_strided(A, shape=(span,), strides=(8,)), r, c
+
+
+_EMPTY = np.zeros(1)
+
+
+def monitor_run_packed(X: np.ndarray, Y: np.ndarray, EX: np.ndarray, F: np.ndarray,
+                       I: np.ndarray) -> None:
+    """:func:`monitor_step_packed` over every row of ``X`` (rows x inputs) into ``Y``
+    (rows x outputs) and ``EX`` (rows x :data:`N_EX`), each float64 in any memory order
+    (the batch path: one compiled loop, :func:`_run_flat`, whatever the layouts; no rows:
+    the loop is only loaded)."""
+    n = X.shape[0]
+    if n == 0:
+        _run_flat(0, _EMPTY, 0, 0, 0, _EMPTY, 0, 0, 0, np.zeros((1, N_EX)), F, I)
+        return
+    fx = _flat(X)
+    if fx is None:
+        fx = _flat(np.array(X, dtype=float))
+    fy = _flat(Y)
+    Yw = Y if fy is not None else np.empty(Y.shape)
+    if fy is None:
+        fy = _flat(Yw)
+    EXw = EX if (EX.dtype == np.float64 and EX.flags.c_contiguous and EX.flags.writeable) \
+        else np.empty(EX.shape)
+    _run_flat(n, fx[0], 0, fx[1], fx[2], fy[0], 0, fy[1], fy[2], EXw, F, I)
+    if Yw is not Y:
+        Y[...] = Yw
+    if EXw is not EX:
+        EX[...] = EXw
 
 
 # ---------------------------------------------------------------- Monitor glue
@@ -651,10 +708,11 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 1
 
 
 def chunk_buffers(k: MonitorKernel, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Row-major input, output and extra buffers of ``rows`` rows for :func:`run_rows`
-    (one set per run: ``MonitorKernel.run``'s own arrays would be fresh, page-faulted
-    memory every chunk)."""
-    return (np.empty((rows, len(k.in_cols))), np.empty((rows, len(k.out_cols))),
+    """Buffers of ``rows`` rows for :func:`run_rows`: the input chunk, one input column
+    per row (each filled by one contiguous copy), and output and extra chunks used only
+    when the caller's ``Y`` / ``EX`` cannot be written in place (one set per run: fresh
+    arrays would be page-faulted memory every chunk)."""
+    return (np.empty((len(k.in_cols), rows)), np.empty((rows, len(k.out_cols))),
             np.empty((rows, N_EX)))
 
 
@@ -663,19 +721,17 @@ def run_rows(k: MonitorKernel, src: list[Any], a: int, b: int,
              EX: np.ndarray) -> None:
     """The compiled loop over rows ``a:b`` of the input columns ``src`` (None: a column
     the log lacks, NaN) in chunks of the buffers' length, into rows ``0:b - a`` of ``Y``
-    (rows x output columns, any memory order) and ``EX``. Chunks of 4096 rows keep the
-    row-major chunk buffers in the cache while they are transposed into a column-major
-    ``Y`` (32768 rows: about 0.4 us/sample more)."""
-    X, Yc, EXc = bufs
-    for s in range(a, b, max(1, len(X))):
-        e = min(b, s + len(X))
-        xb = X[: e - s]
+    (rows x output columns, any memory order) and ``EX``. The compiled loop writes ``Y``
+    and ``EX`` in place (a column-major ``Y`` too) and reads the input chunk column by
+    column: no transposing copy on either side."""
+    XT = bufs[0]
+    rows = max(1, XT.shape[1])
+    for s in range(a, b, rows):
+        e = min(b, s + rows)
+        xb = XT[:, : e - s]
         for j, arr in enumerate(src):
-            xb[:, j] = arr[s:e] if arr is not None else math.nan
-        yb, eb = Yc[: e - s], EXc[: e - s]
-        monitor_run_packed(xb, yb, eb, k.F, k.I)  # = k.run(xb), into the buffers
-        Y[s - a:e - a] = yb
-        EX[s - a:e - a] = eb
+            xb[j] = arr[s:e] if arr is not None else math.nan
+        monitor_run_packed(xb.T, Y[s - a:e - a], EX[s - a:e - a], k.F, k.I)
 
 
 def output_rows(k: MonitorKernel) -> list[tuple[str, str, int]]:

@@ -44,6 +44,7 @@ from grfguard.kernels.vfs import (
     _NJ,
     _S_ANCHOR,
     _S_HN,
+    _S_N,
     _S_PREVF,
     _S_PREVL_OK,
     _kinematics,
@@ -84,6 +85,9 @@ S_VZ, S_VMS, S_VT, S_VON, S_VRMS = 69, 73, 74, 75, 76
 S_BIAS = 77
 S_CMCODE, S_RATIO, S_RF, S_SX, S_SY = 80, 81, 82, 84, 85
 S_RES, S_PHI, S_USE, S_OK, S_E, S_PART, S_CORR, S_ZERO = 86, 94, 118, 126, 134, 142, 158, 166
+# the twin's front state is a copy of the main's (a shared step, then the two sensors'
+# output counters at that time; sys_twin_prepare then skips the comparison)
+S_SYNC, S_SYNC_N, S_SYNC_QN = 174, 175, 176
 N_SYSS = 180
 #: Codes of the common-mode reason (bits of ``mm_code``).
 CM_TOTAL, CM_TOTAL_FEET, CM_COP = 1, 2, 4
@@ -398,19 +402,26 @@ def _vibration(yp, ys, ax, ay):
 
 
 @njit
-def sys_twin_prepare(yp, reset, vstate, qstate, ci):
+def sys_twin_prepare(yp, ys, reset, vstate, qstate, ci):
     """Before the main sensor's step (after its resync): the twin resynced at a break as
     the main (finite differences only: it keeps its filters, attitude, odometry and last
     output, ``VFSKernel.resync``); True when the twin may take the main's front of the
     step this sample (layer on, ``Y_SHARE``, and the twin's front state equal to the
-    main's)."""
+    main's). After a shared step the twin's front state is a copy of the main's: while
+    neither sensor's output counter moved since (no step outside this monitor), the
+    comparison is skipped (both resyncs above set the same values)."""
     if yp[Y_V_ON] == 0.0:
         return False
     if reset:
         qstate[_S_HN] = 0.0
         qstate[_S_PREVF] = 0.0
         qstate[_S_PREVL_OK] = 0.0
-    return yp[Y_SHARE] != 0.0 and same_front_state(vstate, qstate, ci)
+    if yp[Y_SHARE] == 0.0:
+        return False
+    if (ys[S_SYNC] != 0.0 and vstate[_S_N] == ys[S_SYNC_N]
+            and qstate[_S_N] == ys[S_SYNC_QN]):
+        return True
+    return same_front_state(vstate, qstate, ci)
 
 
 @njit
@@ -428,7 +439,11 @@ def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws,
     on = _vibration(yp, ys, xc[ia], xc[ia + 1])  # (reads neither sensor)
     if share and valid:  # the twin's outputs computed only when used
         vfs_step_shared(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws, vstate, vws, on)
+        ys[S_SYNC] = 1.0
+        ys[S_SYNC_N] = vstate[_S_N]
+        ys[S_SYNC_QN] = qstate[_S_N]
     else:
+        ys[S_SYNC] = 0.0
         resolve_pending(qy, qstate, qcf, qci, qws, qiws)
         vfs_step(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws)
     if not on:
