@@ -75,27 +75,35 @@ STAGES = {
 
 #: Analysis written with the figures (by hand; re-runs keep it).
 NOTES = """
-Where the time goes now (Talos, "after" column): the compiled inverse dynamics
-(`grfguard.kernels.rne.wrench_batch`: kinematics of 60 bodies, `cdof`, velocities,
-accelerations, body forces, sole and F/T wrenches) 10.8 µs of 19.2 µs per sample; the
-first kinematics pass (`frames_batch`) 2.4; the SVD of the leveled attitude 1.9; the
-Savitzky-Golay filters 1.9 (were 5.9: `grfguard.kernels.savgol`, bit-identical to scipy);
-the channel monitor 0.6 (was 22.9: `grfguard.kernels.channels`, bit-identical to the
-former Python path, `tests/reference/channels.py`); assembly about 1.5. `run_described`
-outputs are bit-identical to before for both robots (last column) and on two faulty
-12 s Talos walks (offset, drift, gain, frozen; flags, kinds, onsets, recovered forces).
+Where the time goes now (Talos, "after" column of the first table): `run_described` 7.6
+µs per sample (132 k samples/s; was 21.6 in this run, 19.2 in the run below): the
+Savitzky-Golay filters 2.3 (bit-identical to scipy); the inverse dynamics 2.5 (for a
+tree of hinges the stage runs `grfguard.kernels.rne.hinge_wrench_batch`: every fixed
+body merged into its moving parent, Talos 60 bodies -> 33, G1 39 -> 30; each hinge and
+offset folded into one branch-free rotation `B0 + c B1 + s B2`; base axes about the base
+origin; one pass per stage over the bodies; other trees keep `wrench_batch`); the first
+kinematics 0.8 (`hinge_frames_batch` over the 12 leg bodies only); the channel monitor
+0.7; base motion 0.6; the leveled attitude 0.4 (closed-form polar factor instead of the
+SVD); the rest about 1. On this VM the per-body branches cost most: a pose pass with a
+3-way branch per body measured 4.7 µs/sample, the branch-free one a fraction of that.
+
+Outputs (last column): 5.4e-6 N (Talos), 2.4e-6 N (G1) against the "before" sources, on
+purpose: `rotations.rotation_to_quat` took a square root per component and put up to
+about 1e-8 rad of attitude error into samples where a component is near zero; it is now
+Shepperd's method (round trip within 2e-15) and the compiled wrenches take the attitude
+as the matrix it is. Flags and kinds identical; `bench_described_monitor.py
+--clean-walks 10 --no-write`: all 24 rows of "Monitoring Talos and G1" identical;
+`grfguard demo`: every number unchanged. Without the attitude change the new kernels
+move the outputs by at most 1.6e-12 N.
 
 Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
-kinematics included): **not met**: 52 k samples/s for the whole Talos monitor (22 k
-before this work, 13-18 k in the first run below). 300 k/s is 3.3 µs per sample. Left, in
-order of size: (1) the inverse dynamics, 10.8 µs (7x needed; the second kinematics pass
-inside it could reuse `frames_batch`'s base-relative poses, the base attitude being the
-only difference); (2) `frames_batch`, 2.4 µs; (3) the leveled attitude's SVD, 1.9 µs: a
-closed-form polar factor equals it to 6e-15 but moved the wrenches by 3e-6 N, because
-`rotations.rotation_to_quat` (a square root per component) turns 1e-15 of a near-identity
-rotation into 1e-8 rad; that conversion must be made accurate first (an output change
-to make on purpose); (4) the filters, 1.9 µs, bit-identical; an FFT or recursive form
-would cost a few tenths but change the last bits.
+kinematics included): **not met**: 132 k samples/s for the whole Talos monitor (G1 94 k);
+the inverse dynamics alone runs at 395 k/s (Talos), 438 k/s (G1). 300 k/s is 3.3 µs per
+sample; left, in order of size: the filters (2.3 µs: 92 column filters of 101 taps; a
+recursive or FFT form would change the last bits), the inverse dynamics (2.5: the same
+poses are computed twice, in the first pass and in the dynamics; storing them costs
+memory per sample), the numpy assembly between the stages (~2 µs together: base motion,
+attitude, copies and transposes), the channel monitor 0.7.
 """
 
 

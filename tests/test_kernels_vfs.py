@@ -136,6 +136,41 @@ def test_compliance_qp_against_exact_rationals():
     assert worst_scipy <= 1e-7  # measured 2e-9 N
 
 
+def test_warm_started_qp_is_exact_and_independent_of_the_guess():
+    # prior_qp_warm (the split inside the sensor, started from the last sample's positive
+    # corners) gives the exact minimiser, the same bits for every starting guess, and
+    # prior_qp's bits when every corner is positive
+    from grfguard.kernels.nnls import prior_qp_warm
+
+    rng = np.random.default_rng(11)
+    scratch, scratch2 = new_scratch(), new_scratch()
+    worst = 0.0
+    n_partial = 0
+    for _ in range(120):
+        n = int(rng.integers(2, 9))
+        rel = rng.uniform(-0.15, 0.15, (n, 2))
+        total = float(rng.uniform(50.0, 1500.0))
+        prior = total / n + 4.8e5 * rng.normal(0.0, 2e-3, n)
+        prior_qp(rel, prior, total, 1e-3, n, *scratch2)
+        cold = scratch2[0][:n].copy()
+        answers = set()
+        for guess in {0, (1 << n) - 1, *(int(g) for g in rng.integers(0, 1 << n, 6))}:
+            mask = prior_qp_warm(rel, prior, total, 1e-3, n, *scratch, guess)
+            x = scratch[0][:n].copy()
+            assert mask == sum(1 << j for j in range(n) if x[j] > 0.0)
+            answers.add(x.tobytes())
+        assert len(answers) == 1  # the same bits whatever the guess
+        if mask == (1 << n) - 1:
+            assert np.array_equal(x, cold)
+        else:
+            n_partial += 1
+        ours = x * (total / x.sum())
+        exact = exact_prior_qp(rel, prior, total, 1e-3, ours > 0)
+        worst = max(worst, float(np.abs(ours - exact).max()))
+    assert n_partial > 20  # the active set matters in many of the problems
+    assert worst <= 1e-10
+
+
 def test_array_call_rejects_wrong_shapes_and_survives_garbage(walk):
     vfs = CompiledVirtualForceSensor.for_log(walk)
     with pytest.raises(LogFormatError, match="IN_COLUMNS"):

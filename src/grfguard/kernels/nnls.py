@@ -23,7 +23,7 @@ import numpy as np
 
 from grfguard.kernels._jit import njit_nort
 
-__all__ = ["RHO", "prior_qp", "MAX_CORNERS"]
+__all__ = ["RHO", "prior_qp", "prior_qp_warm", "MAX_CORNERS"]
 
 #: Weight of the sum row (the math: ``tests/reference/corner_split.py``).
 RHO = 100.0
@@ -252,6 +252,75 @@ def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
             nfree = keep
             if nfree == 0:
                 break
+
+
+@njit_nort
+def prior_qp_warm(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots, warm):
+    """:func:`prior_qp` started from a guess of the corners with a positive force (bit
+    ``j`` of ``warm``: corner ``j``; e.g. the previous sample's answer); returns the
+    corners with a positive force of the answer (the next call's ``warm``).
+
+    The minimiser is unique, so whichever way it is found only its rounding can differ;
+    to keep the bits independent of the guess (a twin sensor that skips samples gives
+    the same bits as one that does not), every answer with a zero corner is the least
+    squares solve of its positive corners in ascending order (:func:`_solve_set`), found
+    either straight from the guess (when that set is optimal: every force positive and
+    no zero corner that would enter) or after Lawson-Hanson from zero. The all-positive
+    answer is :func:`prior_qp`'s, bit for bit. Same arguments as :func:`prior_qp`.
+    """
+    full = (1 << n) - 1
+    w2 = sw * sw
+    if warm == full or warm == 0:
+        for j in range(n):
+            free[j] = j
+        if _ls_closed_form(rel, prior, total, sw, free, n, z):
+            inside = True
+            for j in range(n):
+                if not z[j] > 0.0:
+                    inside = False
+                    break
+            if inside:
+                for j in range(n):
+                    x[j] = z[j]
+                return full
+    elif _solve_set(rel, prior, total, sw, w2, n, x, z, free, isfree, M, rhs, dots, warm):
+        return warm
+    prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots)
+    mask = 0
+    for j in range(n):
+        if x[j] > 0.0:
+            mask |= 1 << j
+    if mask != 0 and mask != full:
+        # the same set in ascending order (kept as it is if its rounding disagrees)
+        _solve_set(rel, prior, total, sw, w2, n, x, z, free, isfree, M, rhs, dots, mask)
+    return mask
+
+
+@njit_nort
+def _solve_set(rel, prior, total, sw, w2, n, x, z, free, isfree, M, rhs, dots, mask):
+    """Least squares on the corners of ``mask`` (ascending order), the others at zero; if
+    that is the minimiser (positive forces, no corner to enter) write it into ``x`` and
+    return True, else leave ``x`` as it is and return False."""
+    nfree = 0
+    for j in range(n):
+        if (mask >> j) & 1:
+            free[nfree] = j
+            nfree += 1
+            isfree[j] = 1
+        else:
+            isfree[j] = 0
+    _ls_correction(rel, prior, total, sw, free, nfree, z, M, rhs, dots)
+    for c in range(nfree):
+        if not z[free[c]] > 0.0:
+            return False
+    for j in range(n):
+        if isfree[j] == 0:
+            z[j] = 0.0
+    if _entering_corner(rel, prior, total, w2, n, z, free, isfree, nfree) >= 0:
+        return False
+    for j in range(n):
+        x[j] = z[j]
+    return True
 
 
 @njit_nort

@@ -19,6 +19,12 @@ world axes about the subtree CoM of the root body); the kinematics are
 
 Supported: one free joint (the base) and hinge, slide or ball joints, at most one joint per
 body (what URDF trees give: Talos, G1).
+
+For a tree of hinges (Talos, G1) :class:`HingeTree` and :func:`hinge_wrench_batch` do the
+same physics faster: fixed bodies merged into their moving parents, each hinge and offset
+one branch-free rotation, base axes about the base origin, one pass per stage over the
+bodies (agrees with MuJoCo to about 1e-12 relative, ``tests/test_kernels_rne.py``);
+:func:`hinge_frames_batch` is its first kinematics pass.
 """
 
 from __future__ import annotations
@@ -42,7 +48,8 @@ from grfguard.kernels.fk import (
     subtree_com_of,
 )
 
-__all__ = ["RNEModel", "rne_sample", "sample_wrenches", "wrench_batch", "frames_batch", "new_work"]
+__all__ = ["RNEModel", "rne_sample", "sample_wrenches", "wrench_batch", "frames_batch", "new_work",
+           "HingeTree", "hinge_wrench_batch", "hinge_frames_batch", "site_paths"]
 
 @dataclass(frozen=True)
 class RNEModel:

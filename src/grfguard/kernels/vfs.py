@@ -54,7 +54,7 @@ from grfguard.kernels.fk import (
     fk_sites,
     subtree_com_of,
 )
-from grfguard.kernels.nnls import prior_qp
+from grfguard.kernels.nnls import prior_qp_warm
 from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     N_XSTATE,
     P_COM_PAPER,
@@ -114,6 +114,9 @@ _S_PREVF, _S_PREVL_OK, _S_PREVL = 29, 30, 31  # prev_L: 31..33
 _S_LP_OK, _S_FUSE_OK, _S_ACC_OK = 34, 35, 36
 _S_LAST, _S_HAS_LAST = 37, 59  # last output 37..58
 _S_FIXED = 60
+# int scratch (iws): 0..31 contact and solver indices, 32..42 the sites, then the QP's
+# starting guess (contact pattern, positive corners)
+_IW_WARM = 44
 
 
 def _state_size(nbr: int, order: int) -> int:
@@ -277,7 +280,7 @@ def _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x
         _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
         _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
                      qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8),
-                     tail, F2, zmp0, zmp1)
+                     tail, F2, zmp0, zmp1, view1d(iws, _IW_WARM, 2))
     _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
 
 
@@ -773,9 +776,12 @@ def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
 
 @njit_nort
 def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
-                 qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1):
+                 qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1, warm):
     """Compliance prior + QP: the corner forces ``forces`` [N] (0 off contact, NaN if an
-    input is not finite) summing to ``F2`` with their CoP at the ZMP."""
+    input is not finite) summing to ``F2`` with their CoP at the ZMP. ``warm`` (2 ints,
+    scratch): the contact pattern and the positive corners of the last solve, the QP's
+    starting guess (:func:`grfguard.kernels.nnls.prior_qp_warm`; the bits do not depend
+    on it)."""
     cnt = 0
     for k in range(8):
         cnt += ctc[k]
@@ -812,8 +818,8 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
         for c in range(m):
             relc[c, 0] = rel8[cidx[c], 0]
             relc[c, 1] = rel8[cidx[c], 1]
-        prior_qp(relc, tmp8, F2, prm[_P_SW], m, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
-                 qp_dots)
+        _warm_qp(ctc, cidx, m, relc, tmp8, F2, prm[_P_SW], qp_x, qp_z, qp_free, qp_isfree, qp_M,
+                 qp_rhs, qp_dots, warm)
         if m == 8:
             sx = _sum8(qp_x)
         else:
@@ -824,6 +830,30 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
                 qp_x[c] = qp_x[c] * f
         for c in range(m):
             forces[cidx[c]] = qp_x[c]
+
+
+@njit_nort(inline="always")
+def _warm_qp(ctc, cidx, m, relc, prior, F2, sw, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
+             qp_dots, warm):
+    """:func:`prior_qp_warm` on the ``m`` corners in contact (``cidx``), guessing the
+    last solve's positive corners when the contact pattern is the same."""
+    pat = 0
+    for k in range(8):
+        if ctc[k]:
+            pat |= 1 << k
+    guess = 0
+    if warm[0] == pat:
+        for c in range(m):
+            if (warm[1] >> cidx[c]) & 1:
+                guess |= 1 << c
+    mask = prior_qp_warm(relc, prior, F2, sw, m, qp_x, qp_z, qp_free, qp_isfree, qp_M, qp_rhs,
+                         qp_dots, guess)
+    pos = 0
+    for c in range(m):
+        if (mask >> c) & 1:
+            pos |= 1 << cidx[c]
+    warm[0] = pat
+    warm[1] = pos
 
 
 @njit_nort(inline="always")
