@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 from pathlib import Path
 
 from grfguard.model.robot import RobotConfig
@@ -33,3 +34,20 @@ def update_section(section: str, body: str, path: Path = BENCHMARKS_MD) -> None:
     else:
         text = text.rstrip("\n") + "\n\n" + block
     path.write_text(text.rstrip("\n") + "\n")
+
+
+def renamed_copy(src: Path, name: str, work: Path) -> None:
+    """``src/grfguard`` copied to ``work/name`` with every import renamed (once)."""
+    dst = work / name
+    if dst.exists():
+        return
+    shutil.copytree(src / "grfguard", dst, ignore=shutil.ignore_patterns("__pycache__"))
+    pat = [(re.compile(r"\bgrfguard\."), f"{name}."),
+           (re.compile(r"from grfguard import"), f"from {name} import"),
+           (re.compile(r"import grfguard\b"), f"import {name}"),
+           (re.compile(r"\"grfguard\""), f"\"{name}\"")]
+    for f in dst.rglob("*.py"):
+        text = f.read_text()
+        for p, r in pat:
+            text = p.sub(r, text)
+        f.write_text(text)

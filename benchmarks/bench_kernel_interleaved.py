@@ -19,30 +19,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
-import re
-import shutil
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-
-def renamed_copy(src: Path, name: str, work: Path) -> None:
-    """``src/grfguard`` copied to ``work/name`` with every import renamed (once)."""
-    dst = work / name
-    if dst.exists():
-        return
-    shutil.copytree(src / "grfguard", dst, ignore=shutil.ignore_patterns("__pycache__"))
-    pat = [(re.compile(r"\bgrfguard\."), f"{name}."),
-           (re.compile(r"from grfguard import"), f"from {name} import"),
-           (re.compile(r"import grfguard\b"), f"import {name}"),
-           (re.compile(r"\"grfguard\""), f"\"{name}\"")]
-    for f in dst.rglob("*.py"):
-        text = f.read_text()
-        for p, r in pat:
-            text = p.sub(r, text)
-        f.write_text(text)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import renamed_copy  # noqa: E402
 
 
 def main() -> None:

@@ -2,14 +2,11 @@
 60 s SURALP paper walk (seed 0, the paper's four faults, default settings): the
 comparison least sensitive to the load of a shared machine (issue 11).
 
-The other tree is imported as the package ``grfguard_before`` (a renamed copy)::
+The other tree (a directory holding ``grfguard/``) is copied once under ``--work`` as the
+package ``grfguard_before``, every import renamed (``_common.renamed_copy``)::
 
-    git archive <commit> src/grfguard | tar -x -C /tmp/b && mkdir -p /tmp/bpkg
-    mv /tmp/b/src/grfguard /tmp/bpkg/grfguard_before
-    find /tmp/bpkg -name '*.py' | xargs sed -i -E 's/\\bgrfguard\\./grfguard_before./g;
-        s/from grfguard import/from grfguard_before import/g;
-        s/^import grfguard$/import grfguard_before/; s/"grfguard"/"grfguard_before"/g'
-    taskset -c 1 .venv/bin/python benchmarks/bench_vfs_kernel_ab.py --before /tmp/bpkg
+    git archive <commit> src | tar -x -C /tmp/before
+    taskset -c 1 .venv/bin/python benchmarks/bench_vfs_kernel_ab.py --before /tmp/before/src
 
 Prints the largest output difference of the two trees, the minimum and median process
 CPU time per sample of each and the median of the per-slice ratios (this tree / before).
@@ -27,17 +24,23 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import renamed_copy  # noqa: E402
+
 SLICE = 2_000
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", type=Path, required=True,
-                    help="folder holding the package grfguard_before")
+                    help="the other source tree (a directory holding grfguard/)")
+    ap.add_argument("--work", type=Path, default=Path("/tmp/grfguard_vfs_ab"))
     ap.add_argument("--reps", type=int, default=150)
     ap.add_argument("--monitor", action="store_true", help="the whole monitor loop")
     a = ap.parse_args()
-    sys.path.insert(0, str(a.before))
+    a.work.mkdir(parents=True, exist_ok=True)
+    renamed_copy(a.before, "grfguard_before", a.work)
+    sys.path.insert(0, str(a.work))
     from grfguard_before.estimate.vfs import VirtualForceSensor as OldVFS
     from grfguard_before.kernels.vfs import VFSKernel as OldKernel
 
