@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -42,6 +43,9 @@ from grfguard.model.robot import SENSOR_NAMES, RobotConfig
 from grfguard.sim import simulate
 from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import update_section  # noqa: E402
 
 HEADER = "## Model self-calibration"
 READING = (
@@ -359,16 +363,7 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if args.write:
-        p = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
-        old = p.read_text()
-        if HEADER in old:
-            head, rest = old.split(HEADER, 1)
-            nxt = rest.find("\n## ")
-            tail = rest[nxt + 1:] if nxt >= 0 else ""
-            new = head + text + ("\n" + tail if tail else "")
-        else:
-            new = old.rstrip("\n") + "\n" + text
-        p.write_text(new)
+        update_section(HEADER, text)
 
 
 if __name__ == "__main__":

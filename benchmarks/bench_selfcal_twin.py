@@ -27,6 +27,7 @@ import argparse
 import contextlib
 import math
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -43,6 +44,9 @@ from grfguard.model.robot import SENSOR_NAMES, RobotConfig
 from grfguard.sim import simulate
 from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import update_section  # noqa: E402
 
 HEADER = "## Model self-calibration: per-corner noise of the accelerometer-free sensor"
 #: (label, VFSConfig changes, damping of the prototype filter or None)
@@ -191,20 +195,7 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if args.write:
-        p = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
-        old = p.read_text()
-        if HEADER in old:
-            head, rest = old.split(HEADER, 1)
-            nxt = rest.find("\n## ")
-            tail = rest[nxt + 1:] if nxt >= 0 else ""
-            new = head + text + ("\n" + tail if tail else "")
-        else:  # right after the "Model self-calibration" section
-            anchor = "## Model self-calibration\n"
-            i = old.find(anchor)
-            j = old.find("\n## ", i + len(anchor)) if i >= 0 else -1
-            new = (old[:j + 1] + text + "\n" + old[j + 1:]) if j >= 0 else (
-                old.rstrip("\n") + "\n\n" + text)
-        p.write_text(new)
+        update_section(HEADER, text)
 
 
 if __name__ == "__main__":

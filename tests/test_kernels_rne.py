@@ -125,12 +125,19 @@ def test_inverse_dynamics_matches_mujoco(name, request) -> None:
         scale = max(1.0, np.abs(f_ref).max())
         assert np.abs(_free_rows(m, work) - f_ref).max() < 1e-9 * scale
         np.testing.assert_allclose(work[13][:2], d.site_xpos[soles], rtol=0, atol=1e-12)
-        # load shares as grfguard.estimate.wrench._share takes them (CoP in double support)
-        share = _share(np.array(w), alone, d.site_xpos[soles[0]], d.site_xpos[soles[1]])
-        assert np.abs(ground - share[:, None] * alone).max() < 1e-9 * scale
-        if ft:
-            _, _, ft_ref = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet, ground, fts)
-            assert np.abs(ft_out - ft_ref).max() < 1e-9 * scale
+        _assert_ground_and_ft(m, d, (qpos, qvel, qacc), soles, feet, fts if ft else None, w,
+                              alone, ground, ft_out, scale)
+
+
+def _assert_ground_and_ft(m, d, state, soles, feet, fts, w, alone, ground, ft_out,
+                          scale) -> None:
+    """The kernel's sole wrenches split as grfguard.estimate.wrench._share takes them (CoP
+    in double support), and its F/T wrenches (``fts`` not None) equal MuJoCo's."""
+    share = _share(np.array(w), alone, d.site_xpos[soles[0]], d.site_xpos[soles[1]])
+    assert np.abs(ground - share[:, None] * alone).max() < 1e-9 * scale
+    if fts is not None:
+        _, _, ft_ref = _mujoco_reference(m, d, *state, soles, feet, ground, fts)
+        assert np.abs(ft_out - ft_ref).max() < 1e-9 * scale
 
 
 def test_ball_slide_model_matches_mujoco() -> None:
@@ -281,11 +288,8 @@ def test_hinge_tree_matches_mujoco(name, request) -> None:
         assert ht.parent.size == 1 + sum(int(m.body_jntnum[b]) for b in range(2, m.nbody))
         f_ref, alone, _ = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet)
         scale = max(1.0, np.abs(f_ref).max())
-        share = _share(np.array(w), alone, d.site_xpos[soles[0]], d.site_xpos[soles[1]])
-        assert np.abs(ground - share[:, None] * alone).max() < 1e-9 * scale
-        if ft:
-            _, _, ft_ref = _mujoco_reference(m, d, qpos, qvel, qacc, soles, feet, ground, fts)
-            assert np.abs(ft_out - ft_ref).max() < 1e-9 * scale
+        _assert_ground_and_ft(m, d, (qpos, qvel, qacc), soles, feet, fts if ft else None, w,
+                              alone, ground, ft_out, scale)
 
 
 def test_hinge_tree_joint_left_out_stays_at_qpos0() -> None:

@@ -188,23 +188,34 @@ def prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
         x, z: (n,) output / scratch; free, isfree: (n,) int scratch;
         M, rhs, dots: scratch of :func:`_ls_correction`.
     """
-    w2 = sw * sw
     # The problem is strictly convex: when the unconstrained minimiser over every corner
     # is positive it is the answer (the usual case with a compliance prior), one solve
     # instead of n active-set steps. Otherwise (or when the corners are close to a line,
     # where the QR's rounding depends on the corners' order) Lawson-Hanson from x = 0.
+    if not _all_positive(rel, prior, total, sw, n, x, z, free):
+        _lawson_hanson(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots)
+
+
+@njit_nort
+def _all_positive(rel, prior, total, sw, n, x, z, free):
+    """True, with the answer in ``x[:n]``, when the unconstrained minimiser over every
+    corner (closed form) has every force positive."""
     for j in range(n):
         free[j] = j
-    inside = _ls_closed_form(rel, prior, total, sw, free, n, z)
-    if inside:
-        for j in range(n):
-            if not z[j] > 0.0:
-                inside = False
-                break
-    if inside:
-        for j in range(n):
-            x[j] = z[j]
-        return
+    if not _ls_closed_form(rel, prior, total, sw, free, n, z):
+        return False
+    for j in range(n):
+        if not z[j] > 0.0:
+            return False
+    for j in range(n):
+        x[j] = z[j]
+    return True
+
+
+@njit_nort
+def _lawson_hanson(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots):
+    """Lawson-Hanson active set from ``x = 0`` (arguments as :func:`prior_qp`)."""
+    w2 = sw * sw
     for j in range(n):
         x[j] = 0.0
         isfree[j] = 0
@@ -271,21 +282,13 @@ def prior_qp_warm(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots, wa
     full = (1 << n) - 1
     w2 = sw * sw
     if warm == full or warm == 0:
-        for j in range(n):
-            free[j] = j
-        if _ls_closed_form(rel, prior, total, sw, free, n, z):
-            inside = True
-            for j in range(n):
-                if not z[j] > 0.0:
-                    inside = False
-                    break
-            if inside:
-                for j in range(n):
-                    x[j] = z[j]
-                return full
+        if _all_positive(rel, prior, total, sw, n, x, z, free):
+            return full
+        _lawson_hanson(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots)
     elif _solve_set(rel, prior, total, sw, w2, n, x, z, free, isfree, M, rhs, dots, warm):
         return warm
-    prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots)
+    else:
+        prior_qp(rel, prior, total, sw, n, x, z, free, isfree, M, rhs, dots)
     mask = 0
     for j in range(n):
         if x[j] > 0.0:
