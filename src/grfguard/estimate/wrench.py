@@ -330,30 +330,31 @@ def _base_motion(df: pd.DataFrame, robot: LoadedRobot, sig: _Signals, R_WB: np.n
                  p_rel: np.ndarray, p_imu: np.ndarray, w: np.ndarray, omega_B: np.ndarray,
                  alpha_B: np.ndarray, blend: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Stage 5: base velocity and acceleration (T, 3) each, world axes [m/s, m/s^2]."""
+    from grfguard.kernels.rne import base_motion_batch, lever_removed_batch
+
     n, win, dt = sig.t.size, sig.win, sig.dt
+    c = np.ascontiguousarray
     # stance sole still: v_B = -R (w x p + p'), a_B = -R (w x (w x p) + 2 w x p' + a x p + p'')
-    # (base axes; attitude noise is never differentiated)
-    v_loc = np.zeros((n, 3))
-    a_loc = np.zeros((n, 3))
-    for i in range(2):
-        # one array per foot: the edges' polynomial fit (scipy's lstsq over the columns
-        # at once) rounds differently with more columns
-        p, (pd_, pdd) = p_rel[i], _derivs(p_rel[i], win, (1, 2), dt)
-        v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
-        a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
-                                  + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
-    v_B = -np.einsum("tij,tj->ti", R_WB, v_loc)
-    a_B = -np.einsum("tij,tj->ti", R_WB, a_loc)
+    # (base axes; attitude noise is never differentiated); compiled, numpy's operations
+    # one array per foot: the edges' polynomial fit (scipy's lstsq over the columns at
+    # once) rounds differently with more columns
+    der = [_derivs(p_rel[i], win, (1, 2), dt) for i in range(2)]
+    PD = np.stack([der[0][0], der[1][0]])
+    PDD = np.stack([der[0][1], der[1][1]])
+    v_B, a_B = np.empty((n, 3)), np.empty((n, 3))
+    R_WB = c(R_WB, float)
+    omega_B, alpha_B = c(omega_B, float), c(alpha_B, float)
+    base_motion_batch(R_WB, c(p_rel, float), PD, PDD, c(w, float), omega_B, alpha_B, v_B, a_B)
     if blend is not None and {"imu_acc_x", "imu_acc_y", "imu_acc_z"} <= set(df.columns):
         # complementary blend: the accelerometer (lever arm of the IMU removed) with its
         # slow errors (bias, gravity leaking through an attitude error) replaced by the
         # odometry's, whose own error (encoder quantization differentiated twice) is fast
         f_I = df[["imu_acc_x", "imu_acc_y", "imu_acc_z"]].to_numpy(float)
-        r_B = p_imu - 0.0  # IMU position in base axes (base origin at 0)
-        a_imu = np.einsum("tij,tj->ti", sig.R_WI, f_I)
+        a_imu = np.einsum("tij,tj->ti", sig.R_WI, f_I)  # (its order depends on the layout)
         a_imu[:, 2] += float(robot.model.opt.gravity[2])
-        lever = (np.cross(alpha_B, r_B) + np.cross(omega_B, np.cross(omega_B, r_B)))
-        a_acc = _deriv(a_imu - np.einsum("tij,tj->ti", R_WB, lever), win, 0, dt)
+        a_rel = np.empty((n, 3))
+        lever_removed_batch(c(a_imu), R_WB, omega_B, alpha_B, c(p_imu, float), a_rel)
+        a_acc = _deriv(a_rel, win, 0, dt)
         a_B = a_acc + _deriv(a_B - a_acc, _win(blend, dt, n), 0, dt)
     return v_B, a_B
 
