@@ -228,6 +228,31 @@ def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
     return R_WB, np.ascontiguousarray(R_BI), p_rel, R_BS, np.ascontiguousarray(pos[:, 0])
 
 
+def _frames_omega_compiled(robot: LoadedRobot, rm, sig: _Signals):
+    """:func:`_body_frames_compiled` for a tree of hinges plus the base angular velocity
+    ``omega_B = R_BI gyro`` (T, 3), its numpy products compiled
+    (:func:`grfguard.kernels.rne.frames_post_batch`, the same bits); None when the
+    robot's tree is not one of hinges."""
+    from grfguard.kernels.rne import frames_post_batch, hinge_frames_batch, site_paths
+
+    m = robot.model
+    n = sig.t.size
+    sites = (m.site("imu").id,) + tuple(m.site(f"{s}_sole").id for s in SIDES)
+    feet = tuple(m.body(f.body).id for f in robot.description.feet)
+    ht = _hinge_tree(robot, tuple(int(s) for s in sites), feet)
+    if ht is None:
+        return None
+    pos, mat = np.empty((n, 3, 3)), np.empty((n, 3, 9))
+    hinge_frames_batch(np.ascontiguousarray(sig.q, float), ht.arrays(), site_paths(ht),
+                       pos, mat)
+    R_WB, R_BI, omega_B = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3))
+    frames_post_batch(np.ascontiguousarray(sig.R_WI, float), np.ascontiguousarray(mat[:, 0]),
+                      np.ascontiguousarray(sig.gyro_I, float), R_WB, R_BI, omega_B)
+    p_rel = np.ascontiguousarray(np.swapaxes(pos[:, 1:], 0, 1))
+    R_BS = np.ascontiguousarray(np.swapaxes(mat[:, 1:], 0, 1)).reshape(2, n, 3, 3)
+    return (R_WB, R_BI, p_rel, R_BS, np.ascontiguousarray(pos[:, 0])), omega_B
+
+
 def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.ndarray,
                                v_B: np.ndarray, omega_B: np.ndarray, a_B: np.ndarray,
                                alpha_B: np.ndarray, w: np.ndarray
@@ -312,15 +337,21 @@ def _attitude(attitude: str, R_WB: np.ndarray, R_BS: np.ndarray, w: np.ndarray,
     if attitude == "leveled":
         # the IMU's attitude with its slow roll/pitch error removed: the mean over
         # ``level_window`` of the tilt between it and the stance sole lying flat (the
-        # sole's own rocking alternates from step to step and averages out)
+        # sole's own rocking alternates from step to step and averages out); compiled
+        # with numpy's operations (the same bits as D = R_WB R_S, R_S the stance sole in
+        # base axes, tilt = 0.5 (D21 - D12, D02 - D20), then _small_rotations(-tilt) @ R_WB)
+        from grfguard.kernels.rne import level_apply_batch, level_tilt_batch
+
         st = np.argmax(w, axis=1)
-        R_kin = np.swapaxes(R_BS[st, np.arange(n)], 1, 2)  # base in a flat-sole frame
-        D = R_WB @ np.swapaxes(R_kin, 1, 2)  # IMU-based sole attitude (yaw + tilt error)
-        tilt = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0]], axis=1)
+        R_WB = np.ascontiguousarray(R_WB, float)
+        tilt = np.empty((n, 2))
+        level_tilt_batch(R_WB, np.ascontiguousarray(R_BS, float), st, tilt)
         k_lv = max(1, int(round(level_window / dt)))
         tilt = uniform_filter1d(tilt, min(k_lv, n), axis=0, mode="nearest")
         corr = np.column_stack([-tilt, np.zeros(n)])
-        return _small_rotations(corr) @ R_WB
+        out = np.empty((n, 3, 3))
+        level_apply_batch(corr, R_WB, out)
+        return out
     if attitude != "imu":
         raise ValueError(f"attitude must be 'imu', 'leveled' or 'stance', got {attitude!r}")
     return R_WB
@@ -477,15 +508,21 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
         LogFormatError: A joint column is missing.
     """
     sig = _signals(df, robot, window)
+    fo = None
     if compiled:
         from grfguard.kernels.rne import RNEModel
 
         rm = RNEModel.from_mujoco(robot.model)
-        R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames_compiled(robot, rm, sig)
+        fo = _frames_omega_compiled(robot, rm, sig)
+        if fo is not None:
+            (R_WB, R_BI, p_rel, R_BS, p_imu), omega_B = fo
+        else:
+            R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames_compiled(robot, rm, sig)
     else:
         d = mujoco.MjData(robot.model)
         R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames(robot, d, sig)
-    omega_B = np.einsum("tij,tj->ti", R_BI, sig.gyro_I)  # base angular velocity, base axes
+    if fo is None:  # base angular velocity, base axes
+        omega_B = np.einsum("tij,tj->ti", R_BI, sig.gyro_I)
     # the base's angular acceleration is small and slow in walking; differentiating the
     # gyro's white noise needs a longer window than the joints
     alpha_B = _deriv(omega_B, _win(ALPHA_FACTOR * window, sig.dt, sig.t.size), 1, sig.dt)
