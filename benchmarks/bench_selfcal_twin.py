@@ -11,10 +11,9 @@ fused, 60 s walk, seed 1). Plus two oracles (not realisable, they read the simul
 truth or the future) that locate the error: the sensor's corner forces advanced in time,
 and its sole twist ``(f1 - f2 - f3 + f4) / 2`` replaced by the true one.
 
-"prototype" rows replace the rate low-pass (``VFSConfig.filter_cutoff``, second order)
-by a second-order low-pass of damping ``zeta`` (Butterworth: 0.707), designed here and
-slipped into the compiled kernel's filter design for the run (``grfguard._iir.
-butter_lowpass`` patched); the compiled sensor has no such setting.
+"damping" rows: the rate low-pass (``VFSConfig.filter_cutoff``) as a second-order
+low-pass of damping ratio zeta (``VFSConfig.filter_damping``; Butterworth: 0.707), the
+family ``grfguard calibrate --model`` chooses from (``grfguard.calib.twin_filter``).
 
 Usage: ``python benchmarks/bench_selfcal_twin.py [--write]``; ``--write`` replaces the
 ``## Model self-calibration: per-corner noise of the accelerometer-free sensor`` section of
@@ -24,8 +23,6 @@ BENCHMARKS.md.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import math
 import os
 import sys
 import time
@@ -33,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 
-import grfguard._iir as iir
 from grfguard.calib import apply_corrections, corrected_config, estimate_corrections
 from grfguard.detect import MonitorConfig, calibrate_thresholds
 from grfguard.detect.blocks import robust_scale
@@ -49,56 +45,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import update_section  # noqa: E402
 
 HEADER = "## Model self-calibration: per-corner noise of the accelerometer-free sensor"
-#: (label, VFSConfig changes, damping of the prototype filter or None)
+#: (label, VFSConfig changes)
 SETTINGS = (
-    ("Butterworth 2nd order, 10 Hz (today's twin)", {}, None),
-    ("Butterworth 2nd order, 8 Hz", {"filter_cutoff": 8.0}, None),
-    ("Butterworth 2nd order, 9 Hz", {"filter_cutoff": 9.0}, None),
-    ("Butterworth 2nd order, 11 Hz", {"filter_cutoff": 11.0}, None),
-    ("Butterworth 3rd order, 10 Hz", {"filter_order": 3}, None),
-    ("Butterworth 3rd order, 14 Hz", {"filter_order": 3, "filter_cutoff": 14.0}, None),
-    ("pendulum Kalman ZMP (`zmp_filter=\"kalman\"`)", {"zmp_filter": "kalman"}, None),
-    ("pendulum Kalman ZMP, com_acc_psd 1", {"zmp_filter": "kalman", "com_acc_psd": 1.0},
-     None),
-    ("no angular momentum rate", {"use_angular_momentum": False}, None),
-    ("attitude time constant 2 s", {"attitude_time_constant": 2.0}, None),
-    ("prototype: 2nd order 10 Hz, zeta 0.5", {}, 0.5),
-    ("prototype: 2nd order 8 Hz, zeta 0.5", {"filter_cutoff": 8.0}, 0.5),
-    ("prototype: 2nd order 8 Hz, zeta 0.4", {"filter_cutoff": 8.0}, 0.4),
+    ("Butterworth 2nd order, 10 Hz (today's twin)", {}),
+    ("Butterworth 2nd order, 8 Hz", {"filter_cutoff": 8.0}),
+    ("Butterworth 2nd order, 9 Hz", {"filter_cutoff": 9.0}),
+    ("Butterworth 2nd order, 11 Hz", {"filter_cutoff": 11.0}),
+    ("Butterworth 3rd order, 10 Hz", {"filter_order": 3}),
+    ("Butterworth 3rd order, 14 Hz", {"filter_order": 3, "filter_cutoff": 14.0}),
+    ("pendulum Kalman ZMP (`zmp_filter=\"kalman\"`)", {"zmp_filter": "kalman"}),
+    ("pendulum Kalman ZMP, com_acc_psd 1", {"zmp_filter": "kalman", "com_acc_psd": 1.0}),
+    ("no angular momentum rate", {"use_angular_momentum": False}),
+    ("attitude time constant 2 s", {"attitude_time_constant": 2.0}),
+    *((f"damping {z:g}, 2nd order {c:g} Hz", {"filter_cutoff": c, "filter_damping": z})
+      for c, z in ((10.0, 0.5), (9.0, 0.5), (8.0, 0.5), (8.0, 0.4), (7.0, 0.4), (7.0, 0.3))),
 )
 H4 = np.array([[1, 1, 1, 1], [1, 1, -1, -1], [1, -1, 1, -1], [1, -1, -1, 1]], float) / 2
-
-
-def damped_lowpass(cutoff_hz: float, fs_hz: float, zeta: float):
-    """Second-order low-pass ``w^2 / (s^2 + 2 zeta w s + w^2)``, bilinear, prewarped at
-    the cut-off (zeta = 1/sqrt(2): scipy's Butterworth)."""
-    w = 2 * fs_hz * math.tan(math.pi * cutoff_hz / fs_hz)
-    k = 2 * fs_hz
-    a = np.array([k * k + 2 * zeta * w * k + w * w, 2 * w * w - 2 * k * k,
-                  k * k - 2 * zeta * w * k + w * w])
-    b = np.array([w * w, 2 * w * w, w * w])
-    return b / a[0], a / a[0]
-
-
-@contextlib.contextmanager
-def prototype_filter(cutoff_hz: float, zeta: float | None):
-    """Within the block, kernels built with a 2nd-order ``cutoff_hz`` low-pass get
-    :func:`damped_lowpass` instead of the Butterworth."""
-    orig = iir.butter_lowpass
-    if zeta is None:
-        yield
-        return
-
-    def patched(order, cut, fs):
-        if order == 2 and abs(float(cut) - cutoff_hz) < 1e-12:
-            return damped_lowpass(float(cut), float(fs), zeta)
-        return orig(order, cut, fs)
-
-    iir.butter_lowpass = patched
-    try:
-        yield
-    finally:
-        iir.butter_lowpass = orig
 
 
 def corner_threshold(log, cfg) -> float:
@@ -157,12 +119,10 @@ def main() -> None:
              "vib": (apply_corrections(vib, corr_v), corrected_config(MonitorConfig(), corr_v))}
     print(f"exact model corner threshold {c_x:.3f} ({time.time() - t0:.0f} s)", flush=True)
     rows = []
-    for label, change, zeta in SETTINGS:
+    for label, change in SETTINGS:
         vals = {}
         for name, (log, cfg) in cases.items():
-            c = cfg.replace(vfs=cfg.vfs.replace(**change))
-            with prototype_filter(c.vfs.filter_cutoff, zeta):
-                vals[name] = corner_threshold(log, c)
+            vals[name] = corner_threshold(log, cfg.replace(vfs=cfg.vfs.replace(**change)))
         rows.append((label, vals["robot"], vals["vib"]))
         print(f"{label}: robot {vals['robot']:.3f}, vib {vals['vib']:.3f}", flush=True)
     orc = {name: oracles(log, cfg) for name, (log, cfg) in cases.items()}
@@ -176,9 +136,10 @@ def main() -> None:
         "with the weighed mass); *vibrating IMU*: the exact model with the same "
         "accelerometer vibration (60 s walk, seed 1, corrected the same way). Ratio: "
         f"against the exact model with its accelerometer fused ({c_x:.3f}); bound 2, so "
-        f"the robot needs <= {2 * c_x:.3f}. *prototype* rows: a second-order rate "
-        "low-pass of damping zeta (Butterworth 0.707), a filter the compiled sensor does "
-        "not offer (slipped into its filter design for the run).", "",
+        f"the robot needs <= {2 * c_x:.3f}. *damping* rows: the rate low-pass as a "
+        "second-order low-pass of damping ratio zeta (`VFSConfig.filter_damping`; "
+        "Butterworth 0.707), the family `grfguard calibrate --model` chooses from on the "
+        "calibration data (`grfguard.calib.twin_filter`).", "",
         "| setting of the accelerometer-free sensor | robot | ratio | vibrating IMU |",
         "|---|---|---|---|",
     ]

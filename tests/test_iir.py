@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.signal import butter, lfilter_zi
 
-from grfguard._iir import butter_highpass, butter_lowpass
+from grfguard._iir import butter_highpass, butter_lowpass, damped_lowpass
 from grfguard._iir import lfilter_zi as np_lfilter_zi
 
 
@@ -68,6 +68,24 @@ def test_butter_highpass_equals_scipy_bitwise(order: int) -> None:
             butter(order, wn, "highpass")
         with pytest.raises(ValueError):
             butter_highpass(order, wn)
+
+
+def test_damped_lowpass_is_the_butterworth_at_its_damping_and_lags_less_below() -> None:
+    from scipy.signal import group_delay
+
+    for fs, cut in ((1000.0, 10.0), (100.0, 8.0), (500.0, 120.0)):
+        b, a = damped_lowpass(cut, fs, 2**-0.5)
+        bb, ab = butter(2, cut, fs=fs)
+        assert np.allclose(b, bb, rtol=1e-12, atol=1e-15)
+        assert np.allclose(a, ab, rtol=1e-12, atol=1e-15)
+        assert a[0] == 1.0 and b.sum() / a.sum() == pytest.approx(1.0, rel=1e-9)  # DC gain
+    # low-frequency delay 2 zeta / w: 22.5 ms Butterworth at 10 Hz, 15.9 ms for 0.4 at 8 Hz
+    for cut, zeta, ms in ((10.0, 2**-0.5, 22.5), (8.0, 0.4, 15.9)):
+        _, gd = group_delay(damped_lowpass(cut, 1000.0, zeta), w=[0.5], fs=1000.0)
+        assert gd[0] == pytest.approx(ms, abs=0.3)
+    for bad in ((0.0, 1000.0, 0.5), (600.0, 1000.0, 0.5), (10.0, 1000.0, 0.0)):
+        with pytest.raises(ValueError):
+            damped_lowpass(*bad)
 
 
 def test_grfguard_run_does_not_load_scipy_signal(tmp_path) -> None:

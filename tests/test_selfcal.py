@@ -118,3 +118,38 @@ def test_cli_simulate_reality_calibrate_model_and_run(gap_walk, tmp_path):
     assert res.exit_code == 0, res.output
     flags = load_log(out)[[f"flag_{s}" for s in SENSOR_NAMES]]
     assert not flags.any().any()
+
+
+def test_cli_calibrate_model_records_the_twin_filter_and_run_uses_it(tmp_path, monkeypatch):
+    """With a vibrating accelerometer `calibrate --model` chooses the accelerometer-free
+    sensor's rate low-pass (two settings here, to keep the test short), writes it into
+    the thresholds file, and `run` with that file monitors with it: the calibration walk
+    itself is not flagged."""
+    from typer.testing import CliRunner
+
+    import grfguard.calib.twin_filter as tf
+    from grfguard.cli import app
+    from grfguard.cli_calib import corrected_log_and_config
+    from grfguard.detect import MonitorConfig
+    from grfguard.io.logio import load_log, write_log
+    from grfguard.sim.reality import load_reality
+
+    monkeypatch.setattr(tf, "TWIN_FILTER_GRID", ((10.0, None), (8.0, 0.5)))
+    gap = RealityGap(acc_vibration=load_reality("all").acc_vibration, seed=7)
+    log = tmp_path / "vib.parquet"
+    write_log(simulate(gait=GaitConfig(duration=16.0), seed=1, reality=gap), log)
+    th = tmp_path / "th.toml"
+    res = CliRunner().invoke(app, ["calibrate", str(log), "-o", str(th), "--model"])
+    assert res.exit_code == 0, res.output
+    assert "(chosen)" in res.output  # the settings tried, on the console
+    corr = ModelCorrections.from_toml(th)
+    assert not corr.use_accelerometer
+    assert (corr.twin_filter_cutoff_hz, corr.twin_filter_damping) in ((10.0, None), (8.0, 0.5))
+    assert f"twin_filter_cutoff_hz = {corr.twin_filter_cutoff_hz!r}" in th.read_text()
+    _, cfg = corrected_log_and_config(load_log(log), th, MonitorConfig())
+    assert (cfg.vfs.filter_cutoff, cfg.vfs.filter_damping) == (
+        corr.twin_filter_cutoff_hz, corr.twin_filter_damping)
+    out = tmp_path / "o.parquet"
+    res = CliRunner().invoke(app, ["run", str(log), "-o", str(out), "--thresholds", str(th)])
+    assert res.exit_code == 0, res.output
+    assert not load_log(out)[[f"flag_{s}" for s in SENSOR_NAMES]].any().any()

@@ -16,11 +16,13 @@ import pytest
 from grfguard.calib import (
     ModelCorrections,
     apply_corrections,
+    choose_twin_filter,
     corrected_config,
     estimate_corrections,
 )
 from grfguard.detect import Monitor, MonitorConfig, calibrate_thresholds
 from grfguard.detect.system import quiet_vfs_config
+from grfguard.errors import ConfigError
 from grfguard.estimate.vfs import VFSConfig, VirtualForceSensor
 from grfguard.evaluate.vfs_metrics import evaluate_vfs
 from grfguard.faults import inject_faults, parse_fault_spec
@@ -154,3 +156,41 @@ def test_quiet_twin_is_the_more_accurate_sensor_under_vibration(gap):
     default = ss_rmse(VFSConfig())
     assert twin < 0.9 * no_acc
     assert no_acc < 0.5 * default
+
+
+def test_calibration_chooses_records_and_uses_the_twin_filter(gap, cal_walk, corr_m, tmp_path):
+    """The accelerometer-free sensor's rate low-pass chosen on the corrected calibration
+    data (first 25 s; two settings to keep the test short, `calibrate --model` tries
+    ``TWIN_FILTER_GRID``): the lower per-corner threshold wins, the choice is written
+    into the calibration file and read back, the monitor runs the chosen filter, and a
+    12 s walk of another seed of the robot is not flagged with it."""
+    fixed = apply_corrections(cal_walk, corr_m)
+    part = fixed[fixed["time"] < 25.0]
+    grid = ((10.0, None), (8.0, 0.5))
+    chosen, rows = choose_twin_filter([part], corr_m, grid=grid)
+    assert [(r["cutoff_hz"], r["damping"]) for r in rows] == list(grid)
+    ref, damped = rows
+    # damping 0.5 at 8 Hz lags 6 ms less than the 10 Hz Butterworth: a lower threshold
+    assert damped["corner"] < 0.97 * ref["corner"] and damped["chosen"] and not ref["chosen"]
+    assert (chosen.twin_filter_cutoff_hz, chosen.twin_filter_damping) == (8.0, 0.5)
+    assert "rate low-pass 8 Hz, damping 0.5" in chosen.summary()
+    p = tmp_path / "th.toml"
+    p.write_text(chosen.to_toml())
+    back = ModelCorrections.from_toml(p)
+    assert (back.twin_filter_cutoff_hz, back.twin_filter_damping) == (8.0, 0.5)
+    assert ModelCorrections.from_dict(corr_m.to_dict()).twin_filter_damping is None  # old file
+    cfg = corrected_config(MonitorConfig(), back)
+    assert (cfg.vfs.use_accelerometer, cfg.vfs.filter_cutoff, cfg.vfs.filter_damping) == (
+        False, 8.0, 0.5)
+    th = calibrate_thresholds([part], config=cfg)
+    assert th.corner_sigma * th.corner_h == pytest.approx(damped["corner"], rel=1e-12)
+    walk = simulate(gait=GaitConfig(duration=12.0), seed=3, reality=gap)
+    wc = apply_corrections(walk, back)
+    mon = Monitor.for_log(wc, config=cfg.with_thresholds(th))
+    assert mon.vfs.config.filter_damping == 0.5 and mon.vfs.config.filter_cutoff == 8.0
+    out = mon.run(wc)
+    assert not out[[f"flag_{s}" for s in SENSOR_NAMES]].any().any()
+    butter = VirtualForceSensor.for_log(wc, quiet_vfs_config(VFSConfig())).run(wc)
+    assert not np.allclose(out["vfs_r1"], butter["vfs_r1"])  # the damped filter, not 10 Hz
+    with pytest.raises(ConfigError, match="twin_filter_damping"):
+        dataclasses.replace(chosen, twin_filter_damping=0.05)

@@ -46,6 +46,15 @@ def test_config_validation_and_toml_round_trip(tmp_path) -> None:
         VFSConfig.from_dict({"qp_wieght": 1e-6})
     with pytest.raises(ConfigError, match="qp_weight"):
         VFSConfig(qp_weight=-1.0)
+    damped = VFSConfig(filter_cutoff=8.0, filter_damping=0.4)
+    assert VFSConfig.from_toml(damped.to_toml()) == damped
+    assert "filter_damping" not in VFSConfig().to_toml()  # None: the Butterworth
+    with pytest.raises(ConfigError, match=r"filter_damping = 0\.1 .*\[0\.2, 2\.0\]"):
+        VFSConfig(filter_damping=0.1)
+    with pytest.raises(ConfigError, match="filter_damping must be a number"):
+        VFSConfig(filter_damping=True)
+    with pytest.raises(ConfigError, match="filter_order = 3; set filter_order = 2"):
+        VFSConfig(filter_damping=0.5, filter_order=3)
 
 
 # ----------------------------------------------------------------------------- static

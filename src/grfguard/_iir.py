@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["butter_lowpass", "butter_highpass", "lfilter_zi"]
+__all__ = ["butter_lowpass", "butter_highpass", "damped_lowpass", "lfilter_zi"]
 
 
 def _poly(zeros: np.ndarray) -> np.ndarray:
@@ -41,6 +41,31 @@ def butter_lowpass(order: int, cutoff_hz: float, fs_hz: float) -> tuple[np.ndarr
     wn = np.asarray(cutoff_hz, dtype=np.float64)
     fs = float(fs_hz)
     return _butter(order, wn / (fs / 2), "low", f" (fs={fs} -> fs/2={fs / 2})")
+
+
+def damped_lowpass(cutoff_hz: float, fs_hz: float, zeta: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Second-order low-pass ``w^2 / (s^2 + 2 zeta w s + w^2)`` discretised by the bilinear
+    transform prewarped at the cut-off: ``(b, a)`` with ``a[0] = 1``. ``zeta = 1/sqrt(2)``
+    is the second-order Butterworth (equal to :func:`butter_lowpass` to rounding, not
+    bit for bit: use that one for the Butterworth); smaller ``zeta`` lags less and peaks.
+
+    Raises:
+        ValueError: the cut-off is not in ``(0, fs_hz / 2)`` or ``zeta`` is not positive.
+    """
+    fs = float(fs_hz)
+    cut = float(cutoff_hz)
+    if not (0.0 < cut < fs / 2.0):
+        raise ValueError(f"Digital filter critical frequencies must be 0 < Wn < fs/2 "
+                         f"(fs={fs} -> fs/2={fs / 2}); got {cut}")
+    if not (float(zeta) > 0.0):
+        raise ValueError(f"the damping of a low-pass must be positive; got {zeta}")
+    w = 2.0 * fs * np.tan(np.pi * cut / fs)
+    k = 2.0 * fs
+    a = np.array([k * k + 2.0 * zeta * w * k + w * w, 2.0 * w * w - 2.0 * k * k,
+                  k * k - 2.0 * zeta * w * k + w * w])
+    b = np.array([w * w, 2.0 * w * w, w * w])
+    return b / a[0], a / a[0]
 
 
 def butter_highpass(order: int, wn: float) -> tuple[np.ndarray, np.ndarray]:

@@ -23,18 +23,32 @@ def fit_model_corrections(
         The corrected logs (thresholds are calibrated on them), the
         ``[model_corrections]`` TOML text to append to the thresholds file, and the
         monitor config to calibrate the thresholds with (the accelerometer left out of
-        the virtual sensor when it vibrates).
+        the virtual sensor when it vibrates, with the rate low-pass chosen on these logs
+        by :func:`grfguard.calib.twin_filter.choose_twin_filter` at the default
+        false-alarm rate).
     """
     from grfguard.calib import apply_corrections, corrected_config, estimate_corrections
+    from grfguard.calib.twin_filter import choose_twin_filter
     from grfguard.detect import MonitorConfig
 
     corr = estimate_corrections(frames, measured_mass_kg=mass_kg)
-    if console is not None:
-        console.print(f"model corrections: {corr.summary()}")
     if isinstance(config, (str, Path)):
         config = MonitorConfig.from_toml(config)
-    return ([apply_corrections(f, corr) for f in frames], "\n" + corr.to_toml(),
-            corrected_config(config, corr))
+    fixed = [apply_corrections(f, corr) for f in frames]
+    corr, rows = choose_twin_filter(fixed, corr, config)  # accelerometer left out only
+    if rows:
+        fixed = [apply_corrections(f, corr) for f in frames]  # records the chosen filter
+    if console is not None:
+        console.print(f"model corrections: {corr.summary()}")
+        if rows:
+            console.print("accelerometer-free sensor's rate low-pass (per-corner / "
+                          "foot-total threshold on the calibration data): " + "; ".join(
+                              f"{r['cutoff_hz']:g} Hz "
+                              + ("Butterworth" if r["damping"] is None
+                                 else f"damping {r['damping']:g}")
+                              + f" {r['corner']:.3f} / {r['total']:.3f}"
+                              + (" (chosen)" if r["chosen"] else "") for r in rows))
+    return fixed, "\n" + corr.to_toml(), corrected_config(config, corr)
 
 
 def corrected_log_and_config(log: Any, thresholds_path: str | Path, config: Any) -> Any:

@@ -60,12 +60,18 @@ class CausalLowPass:
         dt_s: Sampling period [s].
         order: Filter order.
         n_channels: Number of channels filtered together.
+        damping: Damping ratio of a second-order low-pass instead of the Butterworth
+            (``VFSConfig.filter_damping``); None: Butterworth of ``order``.
     """
 
-    def __init__(self, cutoff_hz: float, dt_s: float, order: int, n_channels: int) -> None:
-        from grfguard._iir import butter_lowpass, lfilter_zi  # scipy's, without scipy.signal
+    def __init__(self, cutoff_hz: float, dt_s: float, order: int, n_channels: int,
+                 damping: float | None = None) -> None:
+        from grfguard._iir import butter_lowpass, damped_lowpass, lfilter_zi
 
-        b, a = butter_lowpass(order, cutoff_hz, 1.0 / dt_s)
+        if damping is not None:
+            b, a = damped_lowpass(cutoff_hz, 1.0 / dt_s, damping)
+        else:
+            b, a = butter_lowpass(order, cutoff_hz, 1.0 / dt_s)
         self.b, self.a = np.asarray(b, float), np.asarray(a, float)
         self.n_channels = n_channels
         self._zi = lfilter_zi(self.b, self.a)

@@ -10,11 +10,13 @@ from grfguard.calib.selfcal import (
     estimate_corrections,
     robot_of,
 )
+from grfguard.calib.twin_filter import choose_twin_filter
 
 __all__ = [
     "ModelCorrections",
     "accelerometer_vibration_rms",
     "apply_corrections",
+    "choose_twin_filter",
     "corrected_config",
     "estimate_corrections",
     "robot_of",

@@ -164,6 +164,13 @@ class ModelCorrections:
             reading minus the true angle). From :func:`estimate_corrections` only each
             leg's net sole tilt, on the ankle pitch and roll (``APPLY_ENCODER_OFFSETS``:
             individually the offsets are too poorly determined to apply).
+        twin_filter_cutoff_hz: Cut-off of the accelerometer-free virtual sensor's rate
+            low-pass [Hz] chosen on the calibration data
+            (:func:`grfguard.calib.twin_filter.choose_twin_filter`); None: the default
+            quiet twin's (:func:`grfguard.detect.system.quiet_vfs_config`). Used only
+            when ``use_accelerometer`` is False.
+        twin_filter_damping: Damping ratio of that low-pass (``VFSConfig.filter_damping``);
+            None: the Butterworth.
     """
 
     mass_kg: float | None = None
@@ -185,8 +192,19 @@ class ModelCorrections:
     encoder_offset_deg: dict[str, float] = field(
         default_factory=lambda: {j: 0.0 for j in JOINT_NAMES}
     )
+    twin_filter_cutoff_hz: float | None = None
+    twin_filter_damping: float | None = None
 
     def __post_init__(self) -> None:
+        from grfguard._validate import check_number
+
+        fix = "recalibrate with `grfguard calibrate --model` or remove the key"
+        if self.twin_filter_cutoff_hz is not None:
+            check_number("model_corrections", "twin_filter_cutoff_hz",
+                         self.twin_filter_cutoff_hz, 0.5, 100.0, "Hz", fix)
+        if self.twin_filter_damping is not None:
+            check_number("model_corrections", "twin_filter_damping",
+                         self.twin_filter_damping, 0.2, 2.0, "", fix)
         for name in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
             v = tuple(float(x) for x in getattr(self, name))
             if len(v) != 3 or not all(math.isfinite(x) for x in v):
@@ -213,8 +231,9 @@ class ModelCorrections:
         d = dataclasses.asdict(self)
         for k in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
             d[k] = list(d[k])
-        if d["mass_kg"] is None:
-            del d["mass_kg"]
+        for k in ("mass_kg", "twin_filter_cutoff_hz", "twin_filter_damping"):
+            if d[k] is None:  # TOML has no null: a missing key is None
+                del d[k]
         return d
 
     @classmethod
@@ -277,8 +296,18 @@ class ModelCorrections:
             f"encoder offsets up to {max(map(abs, self.encoder_offset_deg.values())):.2f} "
             "deg, "
             f"accelerometer vibration {self.acc_vibration_rms_m_s2:.2f} m/s^2 RMS > 10 Hz"
-            + ("" if self.use_accelerometer else " (left out of the virtual sensor)")
+            + ("" if self.use_accelerometer else " (left out of the virtual sensor"
+               + self._twin_filter_text() + ")")
         )
+
+    def _twin_filter_text(self) -> str:
+        """The accelerometer-free sensor's rate low-pass, for :meth:`summary`."""
+        if self.twin_filter_cutoff_hz is None and self.twin_filter_damping is None:
+            return ""
+        z = self.twin_filter_damping
+        cut = self.twin_filter_cutoff_hz
+        return (f"; rate low-pass {'default' if cut is None else f'{cut:g} Hz'}, "
+                + ("Butterworth" if z is None else f"damping {z:g}"))
 
 
 # ---------------------------------------------------------------------- helpers
@@ -877,7 +906,8 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     the virtual sensor settings the corrections call for: when the accelerometer vibrated
     in the calibration data (``corr.use_accelerometer`` False), the monitor's quiet twin
     (:func:`grfguard.detect.system.quiet_vfs_config`: no accelerometer, rate low-pass at
-    10 Hz) from the start.
+    10 Hz, or the cut-off and damping chosen on the calibration data,
+    ``corr.twin_filter_cutoff_hz`` / ``corr.twin_filter_damping``) from the start.
     Unchanged when ``corr`` is None or the accelerometer was quiet."""
     from grfguard.detect import MonitorConfig
     from grfguard.detect.system import quiet_vfs_config
@@ -889,4 +919,9 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     vfs = cfg.vfs if cfg.vfs is not None else VFSConfig()
     if vfs.com_method != "multibody":  # the paper's LIPM filter: nothing to switch
         return cfg
-    return cfg.replace(vfs=quiet_vfs_config(vfs))
+    quiet = quiet_vfs_config(vfs)
+    if corr.twin_filter_cutoff_hz is not None or corr.twin_filter_damping is not None:
+        cut = corr.twin_filter_cutoff_hz
+        quiet = quiet.replace(filter_cutoff=quiet.filter_cutoff if cut is None else cut,
+                              filter_damping=corr.twin_filter_damping)
+    return cfg.replace(vfs=quiet)

@@ -1194,10 +1194,13 @@ class VFSKernel:
         self.body_inertia = np.ascontiguousarray(kin.body_inertia, dtype=float)
         self.corner_radius = np.ascontiguousarray(kin.corner_radius, dtype=float)
         bs, as_, zs = [], [], []
-        from grfguard._iir import butter_lowpass, lfilter_zi  # scipy's, without scipy.signal
+        from grfguard._iir import butter_lowpass, damped_lowpass, lfilter_zi  # no scipy.signal
 
-        for cut in (cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff):
-            b, a = butter_lowpass(cfg.filter_order, cut, 1.0 / cfg.dt)
+        for i, cut in enumerate((cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff)):
+            if i == 0 and cfg.filter_damping is not None:  # the rate low-pass, damped
+                b, a = damped_lowpass(cut, 1.0 / cfg.dt, cfg.filter_damping)
+            else:
+                b, a = butter_lowpass(cfg.filter_order, cut, 1.0 / cfg.dt)
             b, a = np.asarray(b, float), np.asarray(a, float)
             bs.append(b)
             as_.append(a)
