@@ -135,7 +135,7 @@ def _signals(df: pd.DataFrame, robot: LoadedRobot, window: float) -> _Signals:
     t = df["time"].to_numpy(float)
     dt = float(np.median(np.diff(t)))
     win = _win(window, dt, t.size)
-    q = df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float)
+    q = np.ascontiguousarray(df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float))
     # attitude and rates smoothed over the same window (white attitude noise would
     # otherwise be differentiated twice through the sole positions)
     quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
@@ -242,15 +242,13 @@ def _frames_omega_compiled(robot: LoadedRobot, rm, sig: _Signals):
     ht = _hinge_tree(robot, tuple(int(s) for s in sites), feet)
     if ht is None:
         return None
-    pos, mat = np.empty((n, 3, 3)), np.empty((n, 3, 9))
+    pos, mat = np.empty((3, n, 3)), np.empty((3, n, 9))  # site-major: no copies after
     hinge_frames_batch(np.ascontiguousarray(sig.q, float), ht.arrays(), site_paths(ht),
-                       pos, mat)
+                       np.swapaxes(pos, 0, 1), np.swapaxes(mat, 0, 1))
     R_WB, R_BI, omega_B = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3))
-    frames_post_batch(np.ascontiguousarray(sig.R_WI, float), np.ascontiguousarray(mat[:, 0]),
+    frames_post_batch(np.ascontiguousarray(sig.R_WI, float), mat[0],
                       np.ascontiguousarray(sig.gyro_I, float), R_WB, R_BI, omega_B)
-    p_rel = np.ascontiguousarray(np.swapaxes(pos[:, 1:], 0, 1))
-    R_BS = np.ascontiguousarray(np.swapaxes(mat[:, 1:], 0, 1)).reshape(2, n, 3, 3)
-    return (R_WB, R_BI, p_rel, R_BS, np.ascontiguousarray(pos[:, 0])), omega_B
+    return (R_WB, R_BI, pos[1:], mat[1:].reshape(2, n, 3, 3), pos[0]), omega_B
 
 
 def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.ndarray,
@@ -270,8 +268,9 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.nd
     feet_b = [m.body(f.body).id for f in robot.description.feet]
     names = [f"{s}_sole" for s in SIDES] + ([f"{s}_ft" for s in SIDES] if ft else [])
     sites = np.array([m.site(nm).id for nm in names], np.int64)
-    ground = np.zeros((n, 2, 6))
-    ft_out = np.zeros((n, 2, 6))
+    ground_f = np.zeros((2, n, 6))  # foot-major, as returned
+    ft_f = np.zeros((2, n, 6))
+    ground, ft_out = np.swapaxes(ground_f, 0, 1), np.swapaxes(ft_f, 0, 1)  # (n, 2, 6) views
     ht = _hinge_tree(robot, tuple(int(s) for s in sites), tuple(feet_b))
     if ht is not None:
         c = np.ascontiguousarray
@@ -280,6 +279,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.nd
         hinge_wrench_batch(c(sig.q, float), c(sig.qd, float), c(sig.qdd, float), base,
                            c(w, float), c(m.opt.gravity, float), ht.arrays(), ft, ground,
                            ft_out)
+        return ground_f, ft_f
     else:
         jv = _index(robot.dof_adr(robot.joint_names))
         qvel = np.zeros((n, m.nv))
@@ -290,8 +290,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.nd
                      np.ascontiguousarray(w, float), rm.tree.arrays(), rm.site_arrays(),
                      rm.dyn_arrays(), sites, new_work(rm, sites.size), rm.root,
                      np.array(feet_b, np.int64), ft, ground, ft_out)
-    return (np.ascontiguousarray(np.swapaxes(ground, 0, 1)),
-            np.ascontiguousarray(np.swapaxes(ft_out, 0, 1)))
+    return ground_f, ft_f
 
 
 def _hinge_tree(robot: LoadedRobot, sites: tuple[int, ...], feet: tuple[int, ...]):
