@@ -65,7 +65,7 @@ _COMPILED = wrench.estimate_wrenches
 #: name is skipped, so the script also times older sources).
 STAGES = {
     "Savitzky-Golay filters": ("_deriv", "_derivs", "_deriv_many"),
-    "first kinematics (`frames_batch`)": ("_body_frames_compiled",),
+    "first kinematics (`frames_batch`)": ("_body_frames_compiled", "_frames_omega_compiled"),
     "stance weights": ("_stance_weights",),
     "attitude (leveled)": ("_attitude",),
     "base motion (w/o filters)": ("_base_motion",),

@@ -135,7 +135,7 @@ def _signals(df: pd.DataFrame, robot: LoadedRobot, window: float) -> _Signals:
     t = df["time"].to_numpy(float)
     dt = float(np.median(np.diff(t)))
     win = _win(window, dt, t.size)
-    q = df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float)
+    q = np.ascontiguousarray(df[[f"q_{j}" for j in robot.joint_names]].to_numpy(float))
     # attitude and rates smoothed over the same window (white attitude noise would
     # otherwise be differentiated twice through the sole positions)
     quat_I = df[["imu_quat_w", "imu_quat_x", "imu_quat_y", "imu_quat_z"]].to_numpy(float)
@@ -228,6 +228,29 @@ def _body_frames_compiled(robot: LoadedRobot, rm, sig: _Signals):
     return R_WB, np.ascontiguousarray(R_BI), p_rel, R_BS, np.ascontiguousarray(pos[:, 0])
 
 
+def _frames_omega_compiled(robot: LoadedRobot, rm, sig: _Signals):
+    """:func:`_body_frames_compiled` for a tree of hinges plus the base angular velocity
+    ``omega_B = R_BI gyro`` (T, 3), its numpy products compiled
+    (:func:`grfguard.kernels.rne.frames_post_batch`, the same bits); None when the
+    robot's tree is not one of hinges."""
+    from grfguard.kernels.rne import frames_post_batch, hinge_frames_batch, site_paths
+
+    m = robot.model
+    n = sig.t.size
+    sites = (m.site("imu").id,) + tuple(m.site(f"{s}_sole").id for s in SIDES)
+    feet = tuple(m.body(f.body).id for f in robot.description.feet)
+    ht = _hinge_tree(robot, tuple(int(s) for s in sites), feet)
+    if ht is None:
+        return None
+    pos, mat = np.empty((3, n, 3)), np.empty((3, n, 9))  # site-major: no copies after
+    hinge_frames_batch(np.ascontiguousarray(sig.q, float), ht.arrays(), site_paths(ht),
+                       np.swapaxes(pos, 0, 1), np.swapaxes(mat, 0, 1))
+    R_WB, R_BI, omega_B = np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3))
+    frames_post_batch(np.ascontiguousarray(sig.R_WI, float), mat[0],
+                      np.ascontiguousarray(sig.gyro_I, float), R_WB, R_BI, omega_B)
+    return (R_WB, R_BI, pos[1:], mat[1:].reshape(2, n, 3, 3), pos[0]), omega_B
+
+
 def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.ndarray,
                                v_B: np.ndarray, omega_B: np.ndarray, a_B: np.ndarray,
                                alpha_B: np.ndarray, w: np.ndarray
@@ -245,8 +268,9 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.nd
     feet_b = [m.body(f.body).id for f in robot.description.feet]
     names = [f"{s}_sole" for s in SIDES] + ([f"{s}_ft" for s in SIDES] if ft else [])
     sites = np.array([m.site(nm).id for nm in names], np.int64)
-    ground = np.zeros((n, 2, 6))
-    ft_out = np.zeros((n, 2, 6))
+    ground_f = np.zeros((2, n, 6))  # foot-major, as returned
+    ft_f = np.zeros((2, n, 6))
+    ground, ft_out = np.swapaxes(ground_f, 0, 1), np.swapaxes(ft_f, 0, 1)  # (n, 2, 6) views
     ht = _hinge_tree(robot, tuple(int(s) for s in sites), tuple(feet_b))
     if ht is not None:
         c = np.ascontiguousarray
@@ -255,6 +279,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.nd
         hinge_wrench_batch(c(sig.q, float), c(sig.qd, float), c(sig.qdd, float), base,
                            c(w, float), c(m.opt.gravity, float), ht.arrays(), ft, ground,
                            ft_out)
+        return ground_f, ft_f
     else:
         jv = _index(robot.dof_adr(robot.joint_names))
         qvel = np.zeros((n, m.nv))
@@ -265,8 +290,7 @@ def _inverse_dynamics_compiled(robot: LoadedRobot, rm, sig: _Signals, R_B: np.nd
                      np.ascontiguousarray(w, float), rm.tree.arrays(), rm.site_arrays(),
                      rm.dyn_arrays(), sites, new_work(rm, sites.size), rm.root,
                      np.array(feet_b, np.int64), ft, ground, ft_out)
-    return (np.ascontiguousarray(np.swapaxes(ground, 0, 1)),
-            np.ascontiguousarray(np.swapaxes(ft_out, 0, 1)))
+    return ground_f, ft_f
 
 
 def _hinge_tree(robot: LoadedRobot, sites: tuple[int, ...], feet: tuple[int, ...]):
@@ -312,15 +336,21 @@ def _attitude(attitude: str, R_WB: np.ndarray, R_BS: np.ndarray, w: np.ndarray,
     if attitude == "leveled":
         # the IMU's attitude with its slow roll/pitch error removed: the mean over
         # ``level_window`` of the tilt between it and the stance sole lying flat (the
-        # sole's own rocking alternates from step to step and averages out)
+        # sole's own rocking alternates from step to step and averages out); compiled
+        # with numpy's operations (the same bits as D = R_WB R_S, R_S the stance sole in
+        # base axes, tilt = 0.5 (D21 - D12, D02 - D20), then _small_rotations(-tilt) @ R_WB)
+        from grfguard.kernels.rne import level_apply_batch, level_tilt_batch
+
         st = np.argmax(w, axis=1)
-        R_kin = np.swapaxes(R_BS[st, np.arange(n)], 1, 2)  # base in a flat-sole frame
-        D = R_WB @ np.swapaxes(R_kin, 1, 2)  # IMU-based sole attitude (yaw + tilt error)
-        tilt = 0.5 * np.stack([D[:, 2, 1] - D[:, 1, 2], D[:, 0, 2] - D[:, 2, 0]], axis=1)
+        R_WB = np.ascontiguousarray(R_WB, float)
+        tilt = np.empty((n, 2))
+        level_tilt_batch(R_WB, np.ascontiguousarray(R_BS, float), st, tilt)
         k_lv = max(1, int(round(level_window / dt)))
         tilt = uniform_filter1d(tilt, min(k_lv, n), axis=0, mode="nearest")
         corr = np.column_stack([-tilt, np.zeros(n)])
-        return _small_rotations(corr) @ R_WB
+        out = np.empty((n, 3, 3))
+        level_apply_batch(corr, R_WB, out)
+        return out
     if attitude != "imu":
         raise ValueError(f"attitude must be 'imu', 'leveled' or 'stance', got {attitude!r}")
     return R_WB
@@ -330,30 +360,31 @@ def _base_motion(df: pd.DataFrame, robot: LoadedRobot, sig: _Signals, R_WB: np.n
                  p_rel: np.ndarray, p_imu: np.ndarray, w: np.ndarray, omega_B: np.ndarray,
                  alpha_B: np.ndarray, blend: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Stage 5: base velocity and acceleration (T, 3) each, world axes [m/s, m/s^2]."""
+    from grfguard.kernels.rne import base_motion_batch, lever_removed_batch
+
     n, win, dt = sig.t.size, sig.win, sig.dt
+    c = np.ascontiguousarray
     # stance sole still: v_B = -R (w x p + p'), a_B = -R (w x (w x p) + 2 w x p' + a x p + p'')
-    # (base axes; attitude noise is never differentiated)
-    v_loc = np.zeros((n, 3))
-    a_loc = np.zeros((n, 3))
-    for i in range(2):
-        # one array per foot: the edges' polynomial fit (scipy's lstsq over the columns
-        # at once) rounds differently with more columns
-        p, (pd_, pdd) = p_rel[i], _derivs(p_rel[i], win, (1, 2), dt)
-        v_loc += w[:, i, None] * (np.cross(omega_B, p) + pd_)
-        a_loc += w[:, i, None] * (np.cross(omega_B, np.cross(omega_B, p))
-                                  + 2 * np.cross(omega_B, pd_) + np.cross(alpha_B, p) + pdd)
-    v_B = -np.einsum("tij,tj->ti", R_WB, v_loc)
-    a_B = -np.einsum("tij,tj->ti", R_WB, a_loc)
+    # (base axes; attitude noise is never differentiated); compiled, numpy's operations
+    # one array per foot: the edges' polynomial fit (scipy's lstsq over the columns at
+    # once) rounds differently with more columns
+    der = [_derivs(p_rel[i], win, (1, 2), dt) for i in range(2)]
+    PD = np.stack([der[0][0], der[1][0]])
+    PDD = np.stack([der[0][1], der[1][1]])
+    v_B, a_B = np.empty((n, 3)), np.empty((n, 3))
+    R_WB = c(R_WB, float)
+    omega_B, alpha_B = c(omega_B, float), c(alpha_B, float)
+    base_motion_batch(R_WB, c(p_rel, float), PD, PDD, c(w, float), omega_B, alpha_B, v_B, a_B)
     if blend is not None and {"imu_acc_x", "imu_acc_y", "imu_acc_z"} <= set(df.columns):
         # complementary blend: the accelerometer (lever arm of the IMU removed) with its
         # slow errors (bias, gravity leaking through an attitude error) replaced by the
         # odometry's, whose own error (encoder quantization differentiated twice) is fast
         f_I = df[["imu_acc_x", "imu_acc_y", "imu_acc_z"]].to_numpy(float)
-        r_B = p_imu - 0.0  # IMU position in base axes (base origin at 0)
-        a_imu = np.einsum("tij,tj->ti", sig.R_WI, f_I)
+        a_imu = np.einsum("tij,tj->ti", sig.R_WI, f_I)  # (its order depends on the layout)
         a_imu[:, 2] += float(robot.model.opt.gravity[2])
-        lever = (np.cross(alpha_B, r_B) + np.cross(omega_B, np.cross(omega_B, r_B)))
-        a_acc = _deriv(a_imu - np.einsum("tij,tj->ti", R_WB, lever), win, 0, dt)
+        a_rel = np.empty((n, 3))
+        lever_removed_batch(c(a_imu), R_WB, omega_B, alpha_B, c(p_imu, float), a_rel)
+        a_acc = _deriv(a_rel, win, 0, dt)
         a_B = a_acc + _deriv(a_B - a_acc, _win(blend, dt, n), 0, dt)
     return v_B, a_B
 
@@ -476,15 +507,21 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
         LogFormatError: A joint column is missing.
     """
     sig = _signals(df, robot, window)
+    fo = None
     if compiled:
         from grfguard.kernels.rne import RNEModel
 
         rm = RNEModel.from_mujoco(robot.model)
-        R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames_compiled(robot, rm, sig)
+        fo = _frames_omega_compiled(robot, rm, sig)
+        if fo is not None:
+            (R_WB, R_BI, p_rel, R_BS, p_imu), omega_B = fo
+        else:
+            R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames_compiled(robot, rm, sig)
     else:
         d = mujoco.MjData(robot.model)
         R_WB, R_BI, p_rel, R_BS, p_imu = _body_frames(robot, d, sig)
-    omega_B = np.einsum("tij,tj->ti", R_BI, sig.gyro_I)  # base angular velocity, base axes
+    if fo is None:  # base angular velocity, base axes
+        omega_B = np.einsum("tij,tj->ti", R_BI, sig.gyro_I)
     # the base's angular acceleration is small and slow in walking; differentiating the
     # gyro's white noise needs a longer window than the joints
     alpha_B = _deriv(omega_B, _win(ALPHA_FACTOR * window, sig.dt, sig.t.size), 1, sig.dt)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grfguard.errors import ConfigError
-from grfguard.kernels._jit import njit, njit_nort
+from grfguard.kernels._jit import fma, njit, njit_nort
 from grfguard.kernels.fk import (
     BALL,
     FREE,
@@ -795,3 +795,129 @@ def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
             _ht_pose(i, parent[i], math.cos(th), math.sin(th), B, u, axis, anchor, R, X, S)
         for k in range(site_body.shape[0]):
             _site_pose(k, site_body, site_pos, site_rot, R, X, out_pos[t, k], out_mat[t, k])
+
+
+# ------------------------------------------ described robots: base motion from the soles
+@njit_nort(inline="always")
+def _ein3(a0, a1, a2, b0, b1, b2):
+    """``numpy.einsum("tij,tj->ti")``'s sum of three products, in its order."""
+    return (a0 * b0 + a2 * b2) + a1 * b1
+
+
+@njit
+def base_motion_batch(R_WB, P, PD, PDD, W, omega, alpha, v_B, a_B):
+    """The stance-sole odometry of :func:`grfguard.estimate.wrench._base_motion` over a log,
+    the same operations as its numpy form (``np.cross``, ``einsum``), so the same bits:
+    ``v_B = -R_WB sum_i w_i (omega x p_i + p_i')`` and ``a_B = -R_WB sum_i w_i (omega x
+    (omega x p_i) + 2 omega x p_i' + alpha x p_i + p_i'')``. ``P``, ``PD``, ``PDD`` (2, T,
+    3): the soles in base axes and their derivatives; ``W`` (T, 2); ``omega``, ``alpha``
+    (T, 3) base axes; outputs ``v_B``, ``a_B`` (T, 3) world axes."""
+    for t in range(W.shape[0]):
+        o0, o1, o2 = omega[t, 0], omega[t, 1], omega[t, 2]
+        l0, l1, l2 = alpha[t, 0], alpha[t, 1], alpha[t, 2]
+        v0 = v1 = v2 = a0 = a1 = a2 = 0.0
+        for i in range(2):
+            p0, p1, p2 = P[i, t, 0], P[i, t, 1], P[i, t, 2]
+            d0, d1, d2 = PD[i, t, 0], PD[i, t, 1], PD[i, t, 2]
+            w = W[t, i]
+            c0, c1, c2 = _cross(o0, o1, o2, p0, p1, p2)
+            v0 += w * (c0 + d0)
+            v1 += w * (c1 + d1)
+            v2 += w * (c2 + d2)
+            e0, e1, e2 = _cross(o0, o1, o2, c0, c1, c2)
+            f0, f1, f2 = _cross(o0, o1, o2, d0, d1, d2)
+            g0, g1, g2 = _cross(l0, l1, l2, p0, p1, p2)
+            a0 += w * (((e0 + 2 * f0) + g0) + PDD[i, t, 0])
+            a1 += w * (((e1 + 2 * f1) + g1) + PDD[i, t, 1])
+            a2 += w * (((e2 + 2 * f2) + g2) + PDD[i, t, 2])
+        for r in range(3):
+            v_B[t, r] = -_ein3(R_WB[t, r, 0], R_WB[t, r, 1], R_WB[t, r, 2], v0, v1, v2)
+            a_B[t, r] = -_ein3(R_WB[t, r, 0], R_WB[t, r, 1], R_WB[t, r, 2], a0, a1, a2)
+
+
+@njit
+def lever_removed_batch(a_imu, R_WB, omega, alpha, r_B, out):
+    """``a_imu - R_WB (alpha x r + omega x (omega x r))`` (T, 3) into ``out``: the IMU's
+    lever arm ``r`` (base axes) taken out of its world acceleration, as
+    :func:`grfguard.estimate.wrench._base_motion`'s numpy form computes it (same bits)."""
+    for t in range(a_imu.shape[0]):
+        r0, r1, r2 = r_B[t, 0], r_B[t, 1], r_B[t, 2]
+        o0, o1, o2 = omega[t, 0], omega[t, 1], omega[t, 2]
+        b0, b1, b2 = _cross(alpha[t, 0], alpha[t, 1], alpha[t, 2], r0, r1, r2)
+        c0, c1, c2 = _cross(o0, o1, o2, r0, r1, r2)
+        d0, d1, d2 = _cross(o0, o1, o2, c0, c1, c2)
+        l0, l1, l2 = b0 + d0, b1 + d1, b2 + d2
+        for r in range(3):
+            out[t, r] = a_imu[t, r] - _ein3(R_WB[t, r, 0], R_WB[t, r, 1], R_WB[t, r, 2], l0,
+                                            l1, l2)
+
+
+@njit_nort(inline="always")
+def _mm_entry(a0, a1, a2, b0, b1, b2):
+    """One entry of numpy's (BLAS) 3x3 ``matmul``, in its order: fused multiply-adds."""
+    return fma(a2, b2, fma(a1, b1, a0 * b0))
+
+
+@njit
+def frames_post_batch(R_WI, mat, gyro, R_WB, R_BI, omega):
+    """After the first kinematics pass, the same bits as :func:`grfguard.estimate.wrench
+    ._body_frames_compiled` and ``estimate_wrenches``' numpy: ``R_BI`` (T, 3, 3) the IMU
+    in base axes (``mat[:, 0]``, (T, 9) row-major), ``R_WB = R_WI R_BI^T`` (numpy's
+    ``matmul``), ``omega = R_BI gyro`` (numpy's ``einsum``)."""
+    for t in range(R_WI.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                R_BI[t, i, j] = mat[t, 3 * i + j]
+        for i in range(3):
+            for j in range(3):
+                R_WB[t, i, j] = _mm_entry(R_WI[t, i, 0], R_WI[t, i, 1], R_WI[t, i, 2],
+                                          mat[t, 3 * j], mat[t, 3 * j + 1], mat[t, 3 * j + 2])
+            omega[t, i] = _ein3(mat[t, 3 * i], mat[t, 3 * i + 1], mat[t, 3 * i + 2],
+                                gyro[t, 0], gyro[t, 1], gyro[t, 2])
+
+
+@njit
+def level_tilt_batch(R_WB, R_BS, st, tilt):
+    """The leveled attitude's tilt (T, 2) before averaging, as :func:`grfguard.estimate
+    .wrench._attitude` computes it (same bits): ``D = R_WB R_S`` (``R_S`` the stance sole
+    ``st[t]`` in base axes, numpy's ``matmul``), ``tilt = 0.5 (D21 - D12, D02 - D20)``."""
+    d = np.empty(9)
+    for t in range(R_WB.shape[0]):
+        S = R_BS[st[t], t]
+        for i in range(3):
+            for j in range(3):
+                d[3 * i + j] = _mm_entry(R_WB[t, i, 0], R_WB[t, i, 1], R_WB[t, i, 2],
+                                         S[0, j], S[1, j], S[2, j])
+        tilt[t, 0] = 0.5 * (d[7] - d[5])
+        tilt[t, 1] = 0.5 * (d[2] - d[6])
+
+
+@njit
+def level_apply_batch(rv, R_WB, out):
+    """``out = Q(rv) R_WB`` (T, 3, 3): :func:`grfguard.estimate.wrench._small_rotations`'s
+    closed-form polar factor ``Q`` of each small rotation vector ``rv`` (T, 3) times the
+    attitude (numpy's ``matmul``), the same operations and bits as the numpy form."""
+    q = np.empty(9)
+    for t in range(rv.shape[0]):
+        r0, r1, r2 = rv[t, 0], rv[t, 1], rv[t, 2]
+        s = math.sqrt(1.0 + ((r0 * r0 + r2 * r2) + r1 * r1))  # einsum("ti,ti->t")
+        a = 1.0 / s
+        b = a / (s + 1.0)
+        for i in range(3):
+            bi = b * rv[t, i]
+            for j in range(3):
+                q[3 * i + j] = bi * rv[t, j]
+        q[0] += a
+        q[4] += a
+        q[8] += a
+        k0, k1, k2 = r0 * a, r1 * a, r2 * a
+        q[1] -= k2
+        q[2] += k1
+        q[5] -= k0
+        q[3] += k2
+        q[6] -= k1
+        q[7] += k0
+        for i in range(3):
+            for j in range(3):
+                out[t, i, j] = _mm_entry(q[3 * i], q[3 * i + 1], q[3 * i + 2], R_WB[t, 0, j],
+                                         R_WB[t, 1, j], R_WB[t, 2, j])

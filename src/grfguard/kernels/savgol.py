@@ -76,21 +76,22 @@ def _taps(flat, row, k0, nb, w, h, sym, a, t):
 def savgol_block(xt, W, sym, out):
     """Interior samples of every order: ``xt`` (m, n) C-contiguous columns, ``W``
     (orders, win) correlation weights, ``sym`` (orders,) 1 / -1 / 0, ``out`` (orders,
-    m, n) (the first and last ``win // 2`` samples are left as they are)."""
+    n, m): the samples as rows, as the caller's arrays are (the first and last
+    ``win // 2`` rows are left as they are)."""
     m, n = xt.shape
     no, win = W.shape
     h = win // 2
     flat = xt.ravel()
     a = np.empty(BLOCK)  # the order's block (plain arrays: kept alive by numba)
     tb = np.empty(BLOCK)  # pair sums / differences of one tap, rounded as in scipy
-    for c in range(m):
-        row = c * n
-        for k0 in range(h, n - h, BLOCK):
-            nb = min(BLOCK, n - h - k0)
+    for k0 in range(h, n - h, BLOCK):  # a block of rows of every column: stays in cache
+        nb = min(BLOCK, n - h - k0)
+        for c in range(m):
+            row = c * n
             for o in range(no):
                 _taps(flat, row, k0, nb, W[o], h, sym[o], a, tb)
                 for i in range(nb):
-                    out[o, c, k0 + i] = a[i]
+                    out[o, k0 + i, c] = a[i]
 
 
 def _symmetry(w: np.ndarray) -> int:
@@ -122,8 +123,9 @@ def _weights(win: int, polyorder: int, orders: tuple[int, ...], dt: float
 def _fit_edges(xt: np.ndarray, win: int, polyorder: int, orders: tuple[int, ...], dt: float,
                outs: list[np.ndarray]) -> None:
     """scipy's ``_fit_edges_polyfit`` (``mode="interp"``) of the (m, n) columns ``xt``
-    along the last axis into each of ``outs`` (one per order), the same operations, with
-    each edge's polynomial fit done once for all orders instead of once per order."""
+    along the last axis into each of ``outs`` ((n, m), one per order), the same
+    operations, with each edge's polynomial fit done once for all orders instead of once
+    per order."""
     from scipy._lib._array_api import array_namespace
     from scipy.signal import _polyutils as pu
     from scipy.signal._savitzky_golay import _polyder
@@ -136,8 +138,7 @@ def _fit_edges(xt: np.ndarray, win: int, polyorder: int, orders: tuple[int, ...]
         i = xp.reshape(xp.arange(i0 - w0, i1 - w0, dtype=coeffs.dtype), (-1, 1))
         for o, y in zip(orders, outs, strict=True):
             pc = _polyder(coeffs, o, xp=xp) if o > 0 else coeffs
-            values = pu.polyval(pc, i, xp=xp) / (dt ** o)
-            y[:, i0:i1] = values.swapaxes(0, -1)
+            y[i0:i1] = pu.polyval(pc, i, xp=xp) / (dt ** o)
 
 
 def savgol_many(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float,
@@ -150,10 +151,10 @@ def savgol_many(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float,
                          f"{x.shape} and {win}")
     W, sym = _weights(int(win), int(polyorder), tuple(int(o) for o in orders), float(dt))
     xt = np.ascontiguousarray(x.T)
-    out = np.empty((len(orders),) + xt.shape)
+    out = np.empty((len(orders),) + x.shape)
     savgol_block(xt, W, sym, out)
     _fit_edges(xt, win, polyorder, tuple(orders), dt, list(out))
-    return [np.ascontiguousarray(y.T) for y in out]
+    return list(out)
 
 
 def warm() -> None:
@@ -161,4 +162,4 @@ def warm() -> None:
     :func:`savgol_many`'s call but without importing ``scipy.signal`` (about 1 s of start-up
     that :func:`grfguard.kernels.warm_up`, run by every ``Monitor.for_log``, would pay)."""
     savgol_block(np.zeros((2, 7)), np.zeros((3, 5)), np.zeros(3, np.int64),
-                 np.empty((3, 2, 7)))
+                 np.empty((3, 7, 2)))
