@@ -1,5 +1,6 @@
-"""CPU time of the compiled monitor loop and of ``Monitor.run`` for two source trees,
-interleaved in one process (the comparison least sensitive to a shared machine's load).
+"""CPU time of the compiled monitor loop and of ``Monitor.run`` for two (or more) source
+trees, interleaved in one process (the comparison least sensitive to a shared machine's
+load).
 
 SURALP, the paper scenario on the 60 s walk (seed 0), default monitor (common-mode layer
 on, VFS inside). Each tree's ``grfguard`` package is copied once under ``--work`` with
@@ -12,6 +13,9 @@ the best of ``--runs`` ``Monitor.run`` calls per tree (also alternated)::
     git archive <commit> src | tar -x -C /tmp/before
     taskset -c 0 .venv/bin/python benchmarks/bench_kernel_interleaved.py \\
         /tmp/before/src src --names gbefore gafter --work /tmp/interleaved
+
+More trees (scratch variants, each against the first): list them all, with as many
+``--names``; ratios and bit-equality are then printed per tree against the first.
 """
 
 from __future__ import annotations
@@ -31,15 +35,23 @@ from _common import renamed_copy  # noqa: E402
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("a", type=Path, help="source tree A (a directory holding grfguard/)")
-    ap.add_argument("b", type=Path, help="source tree B")
-    ap.add_argument("--names", nargs=2, default=("gtree_a", "gtree_b"))
+    ap.add_argument("trees", type=Path, nargs="+",
+                    help="source trees (directories holding grfguard/), the first the reference")
+    ap.add_argument("--names", nargs="+", default=None, help="package name per tree")
     ap.add_argument("--work", type=Path, default=Path("/tmp/grfguard_interleaved"))
     ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--runs", type=int, default=5, help="Monitor.run calls per tree")
+    ap.add_argument("--order", choices=("C", "F"), default="C",
+                    help="memory order of the loop's output (F: as Monitor.run's)")
     a = ap.parse_args()
+    if len(a.trees) < 2:
+        ap.error("give at least two source trees")
+    if a.names is None:
+        a.names = [f"gtree_{i}" for i in range(len(a.trees))]
+    if len(a.names) != len(a.trees):
+        ap.error(f"--names: {len(a.names)} names for {len(a.trees)} trees")
     a.work.mkdir(parents=True, exist_ok=True)
-    for src, name in zip((a.a, a.b), a.names, strict=True):
+    for src, name in zip(a.trees, a.names, strict=True):
         renamed_copy(src, name, a.work)
     sys.path.insert(0, str(a.work))
     sim = importlib.import_module(a.names[0] + ".sim")  # tree A's simulator and faults
@@ -56,35 +68,46 @@ def main() -> None:
         k = mon._kernel(True, True)
         X = np.ascontiguousarray(np.column_stack([
             raw[c].to_numpy(float) if c in raw else np.full(n, np.nan) for c in k.in_cols]))
-        Y, EX = np.empty((n, len(k.out_cols))), np.empty((n, km.N_EX))
+        Y, EX = np.empty((n, len(k.out_cols)), order=a.order), np.empty((n, km.N_EX))
         k.reset()
         km.monitor_run_packed(X, Y, EX, k.F, k.I)
         trees.append((mon, k, km, X, Y, EX))
-    same = np.array_equal(trees[0][4].view(np.int64), trees[1][4].view(np.int64))
-    loop: list[list[float]] = [[], []]
+    nt = len(trees)
+    ref = trees[0][4]
+    same = [np.array_equal(ref.view(np.int64), t[4].view(np.int64)) for t in trees]
+    diff = [float(np.nanmax(np.abs(ref - t[4]), initial=0.0)) for t in trees]
+    loop: list[list[float]] = [[] for _ in trees]
     for r in range(a.rounds):
-        for i in ((0, 1) if r % 2 == 0 else (1, 0)):
+        for i in _order(r, nt):
             mon, k, km, X, Y, EX = trees[i]
             k.reset()
             c = time.process_time()
             km.monitor_run_packed(X, Y, EX, k.F, k.I)
             loop[i].append((time.process_time() - c) / n * 1e6)
-    run: list[list[float]] = [[], []]
+    run: list[list[float]] = [[] for _ in trees]
     for r in range(a.runs):
-        for i in ((0, 1) if r % 2 == 0 else (1, 0)):
+        for i in _order(r, nt):
             c = time.process_time()
             trees[i][0].run(raw)
             run[i].append((time.process_time() - c) / n * 1e6)
-    la, lb = np.array(loop[0]), np.array(loop[1])
-    print(f"outputs of the loop equal bit for bit: {same}")
+    la = np.array(loop[0])
     for i, name in enumerate(a.names):
         li = np.array(loop[i])
         print(f"{name}: loop min {li.min():.3f} median {np.median(li):.3f} µs/sample CPU; "
               f"Monitor.run min {min(run[i]):.3f} µs/sample CPU "
               f"({1e6 / min(run[i]) / 1e3:.0f} k samples/s)")
-    print(f"B/A: loop mins {lb.min() / la.min():.3f}, median of round ratios "
-          f"{np.median(lb / la):.3f}; Monitor.run mins {min(run[1]) / min(run[0]):.3f}; "
-          f"load {os.getloadavg()[0]:.1f}")
+        if i:
+            print(f"  {name}/{a.names[0]}: loop mins {li.min() / la.min():.3f}, median of "
+                  f"round ratios {np.median(li / la):.3f}; Monitor.run mins "
+                  f"{min(run[i]) / min(run[0]):.3f}; loop outputs equal bit for bit: "
+                  f"{same[i]} (largest difference {diff[i]:.3g})")
+    print(f"load {os.getloadavg()[0]:.1f}")
+
+
+def _order(r: int, n: int) -> list[int]:
+    """The trees' order in round ``r``: rotated each round, reversed every other one."""
+    o = [(r + i) % n for i in range(n)]
+    return o[::-1] if r % 2 else o
 
 
 if __name__ == "__main__":

@@ -281,7 +281,7 @@ def run_log(
     block by block, otherwise ``monitor_run`` and ``write``:
     ``benchmarks/bench_run_cli.py`` times them)."""
     from grfguard._cliutil import check_log_plausible, robot_for_log
-    from grfguard.io.anyread import read_any
+    from grfguard.io.anyread import is_bag, read_any
     from grfguard.io.logio import write_log
     from grfguard.io.safe import check_output
 
@@ -294,8 +294,12 @@ def run_log(
         df = load_robot_log(log, robot)
         df.attrs.setdefault("robot_name", robot)
         df.attrs.setdefault("sensing", rob.sensing)
+        source = None
     else:
         df = read_any(log, topics_map, time_order=time_order, copy=False)  # read-only columns
+        # a Parquet log read as it is: its columns may be copied into the output unchanged
+        plain = time_order == "strict" and log.suffix.lower() != ".csv" and not is_bag(log)
+        source = log if plain else None
     mark("read")
     robot_for_log(df, rob, str(log))
     if unit_check:
@@ -303,7 +307,8 @@ def run_log(
     mark("checks")
     with _blas_probe_without_scipy_linalg():
         result = _run_segments(df, config=config, thresholds=thresholds, method=method,
-                               vfs=vfs, compiled=compiled, mark=mark, output=output)
+                               vfs=vfs, compiled=compiled, mark=mark, output=output,
+                               source=source)
     if isinstance(result, int):  # written block by block (io/runwriter.py)
         mark("run_write")
         return result
@@ -373,7 +378,7 @@ def _run_segments(df: Any, **kw: Any) -> Any:
         return _run_monitor(df, **kw)
     import pandas as pd
 
-    kw["output"] = None
+    kw["output"] = kw["source"] = None
     parts = []
     for k, part in df.groupby(SEGMENT, sort=False):
         seg = part.drop(columns=[SEGMENT]).reset_index(drop=True)
@@ -395,10 +400,13 @@ def _run_monitor(
     compiled: bool = True,
     mark: Any = None,
     output: Path | None = None,
+    source: Path | None = None,
 ) -> Any:
     """The monitor's output frame of ``df``; with ``output`` (a Parquet path) the compiled
     monitor writes it there block by block and the number of rows is returned instead
-    (:func:`grfguard.io.runwriter.write_run`; the frame when it runs the Python stages)."""
+    (:func:`grfguard.io.runwriter.write_run`; the frame when it runs the Python stages).
+    ``source``: the Parquet file ``df`` was read from as it is (its unchanged columns are
+    then copied into ``output``), or None."""
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
     from grfguard.estimate.described import is_described, run_described
@@ -414,6 +422,7 @@ def _run_monitor(
         from grfguard.cli_calib import corrected_log_and_config
 
         df, cfg = corrected_log_and_config(df, thresholds, cfg)
+        source = None  # (corrected sensor columns)
     batch = output is not None and output.suffix.lower() != ".csv"
     mon = Monitor.for_log(df, config=cfg, warm=not batch)  # batch: loads only its loop
     if mark is not None:
@@ -421,7 +430,7 @@ def _run_monitor(
     if batch:
         from grfguard.io.runwriter import write_run
 
-        n = write_run(mon, df, output, phase=mark)
+        n = write_run(mon, df, output, phase=mark, source=source)
         if n is not None:
             return n
     return mon.run(df)

@@ -37,13 +37,20 @@ _CHUNK = 1 << 12
 
 
 def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
-              phase: Any = None) -> int | None:
+              phase: Any = None, source: str | Path | None = None) -> int | None:
     """Run ``mon`` (a :class:`~grfguard.pipeline.Monitor`, reset first) over ``log`` and
     write the output to the Parquet file ``path`` (atomically, as
     :func:`~grfguard.io.logio.write_log`), block by block.
 
     ``phase("kernel_setup")`` (optional) is called once the compiled loop is loaded (from
     numba's on-disk cache, or compiled), before the first row runs.
+
+    ``source``: the Parquet file ``log`` was read from, unchanged (every row, columns
+    as read: :func:`grfguard.io.logio.read_log` with the default ``time_order``). The
+    log's columns that the output keeps as they are (not replaced by the monitor's;
+    numbers and booleans without NaN or null, of the file's type) are then copied from
+    it byte for byte instead of being encoded again (:func:`_write_spliced`); the file
+    read back is the same. A file that does not qualify is ignored.
 
     Returns:
         The number of rows written, or None (nothing written) when the monitor does not
@@ -54,10 +61,8 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
         OutputError: ``path`` could not be written (nothing is changed).
     """
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    from grfguard.io.logio import METADATA_KEY, parquet_options, to_jsonable
-    from grfguard.io.safe import atomic_path
+    from grfguard.io.logio import METADATA_KEY, to_jsonable
 
     k = mon._batch_kernel(log)
     if k is None:
@@ -70,23 +75,135 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
     if phase is not None:
         phase("kernel_setup")
     n = len(log)
-    blocks = _Blocks(mon, k, log, max(1, min(rows, n)))
     meta = json.dumps(to_jsonable({**log.attrs, "monitor": mon.describe()}), sort_keys=True)
+    metadata = {METADATA_KEY: meta.encode()}
+    src = _splice_source(source, log, km, k) if source is not None and n else None
+    try:
+        if src is not None:
+            footer, raw = src
+            blocks = _Blocks(mon, k, log, max(1, min(rows, n)), raw=raw)
+            _write_spliced(blocks, footer, path, metadata, rows)
+        else:
+            _write_blocks(_Blocks(mon, k, log, max(1, min(rows, n))), path, metadata, rows)
+    except pa.ArrowException as exc:  # pragma: no cover - pyarrow wraps some OS errors
+        raise OSError(errno.EIO, str(exc)) from None
+    return n
+
+
+def _write_blocks(blocks: _Blocks, path: str | Path, metadata: dict, rows: int) -> None:
+    """The output block by block, one row group per block."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from grfguard.io.logio import parquet_options
+    from grfguard.io.safe import atomic_path
+
+    n = len(blocks.log)
     first = blocks.block(0, min(n, rows))
-    schema = pa.schema([pa.field(c, a.type) for c, a in first.items()],
-                       metadata={METADATA_KEY: meta.encode()})
+    schema = pa.schema([pa.field(c, a.type) for c, a in first.items()], metadata=metadata)
     opts = parquet_options(schema)
     opts.pop("row_group_size")
     with atomic_path(Path(path), what="log") as tmp:
-        try:
-            with pq.ParquetWriter(tmp, schema, **opts) as writer:
-                writer.write_table(_table(first, schema))
-                del first
-                for a in range(rows, n, rows):
-                    writer.write_table(_table(blocks.block(a, min(n, a + rows)), schema))
-        except pa.ArrowException as exc:  # pragma: no cover - pyarrow wraps some OS errors
-            raise OSError(errno.EIO, str(exc)) from None
-    return n
+        with pq.ParquetWriter(tmp, schema, **opts) as writer:
+            writer.write_table(_table(first, schema))
+            del first
+            for a in range(rows, n, rows):
+                writer.write_table(_table(blocks.block(a, min(n, a + rows)), schema))
+
+
+def _splice_source(source: str | Path, log: Any, km: Any, k: Any) -> tuple[Any, set] | None:
+    """The parsed footer of ``source`` and the log's columns to copy from it, or None
+    when nothing is copied (not a plain Parquet file, other rows, no such column)."""
+    from grfguard.io.splice import ParquetFooter, same_leaf_type
+
+    try:
+        footer = ParquetFooter(source)
+        ok = footer.plain() and footer.num_rows == len(log) and all(footer.rows_per_group())
+    except (OSError, ValueError):
+        return None
+    if not ok:
+        return None
+    log = log.copy(deep=False)
+    log.attrs = {}  # column access would deep-copy the metadata every time
+    new = {name for name, _, _ in km.output_rows(k)}
+    leaves = set(footer.leaves)
+    raw = [c for c in log.columns if c in leaves and c not in new and _copyable(log[c])]
+    if raw:  # the copied pages must read as the output's schema says
+        template = _template(log, raw, {})
+        raw = [c for c in raw if same_leaf_type(footer.element(c), template.element(c))]
+    return (footer, set(raw)) if raw else None
+
+
+def _copyable(col: Any) -> bool:
+    """A log column written as the file holds it: numpy numbers or booleans (a column
+    read with nulls is float or object) and, for floats, no NaN (written as null)."""
+    dtype = getattr(col, "dtype", None)
+    if not isinstance(dtype, np.dtype) or dtype.kind not in "biuf":
+        return False
+    if dtype.kind == "f":
+        a = np.asarray(col)
+        return not (a.size and np.isnan(a.min()))
+    return True
+
+
+def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dict,
+                   rows: int) -> None:
+    """The output with the columns ``blocks.raw`` copied from the file of ``footer`` and
+    the others encoded by pyarrow, row group by row group of that file (each group's
+    blocks held until it is written): :class:`grfguard.io.splice.Splicer`."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from grfguard.io.logio import parquet_options
+    from grfguard.io.safe import atomic_path
+    from grfguard.io.splice import Splicer
+
+    raw = [c for c in blocks.order if c in blocks.raw]
+    with atomic_path(Path(path), what="log") as tmp, open(tmp, "wb", buffering=0) as fh:
+        sp = Splicer(fh, footer)
+        writer = schema = None
+        a = 0
+        for g, m in enumerate(footer.rows_per_group()):
+            keep = np.empty((blocks.n_float, m))  # the group's float columns, held
+            parts = [blocks.block(s, min(a + m, s + rows), keep=keep[:, s - a:])
+                     for s in range(a, a + m, rows)]
+            if writer is None:
+                schema = pa.schema([pa.field(c, x.type) for c, x in parts[0].items()])
+                opts = parquet_options(schema)
+                opts.pop("row_group_size")
+                writer = pq.ParquetWriter(sp.sink, schema, **opts)
+            table = pa.Table.from_arrays([pa.chunked_array([p[c] for p in parts], f.type)
+                                          for c, f in zip(schema.names, schema, strict=True)],
+                                         schema=schema)
+            del parts
+            sp.copy_group(g, raw)
+            writer.write_table(table, row_group_size=m)
+            del table
+            a += m
+        sp.sink.hold()
+        writer.close()
+        sp.finish(_template(blocks.log, blocks.order, metadata, schema), blocks.order)
+
+
+def _template(log: Any, order: list[str], metadata: dict, written: Any = None) -> Any:
+    """The parsed footer of an empty Parquet file with the columns ``order``: those of
+    the ``written`` schema of their type there, the others (the log's copied columns)
+    of the type the frame path gives them."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from grfguard.io.logio import parquet_options
+    from grfguard.io.splice import ParquetFooter
+
+    types = {f.name: f.type for f in written} if written is not None else {}
+    full = pa.schema([pa.field(c, types[c] if c in types else
+                               pa.from_numpy_dtype(log[c].dtype)) for c in order],
+                     metadata=metadata)
+    sink = pa.BufferOutputStream()
+    opts = parquet_options(full)
+    opts.pop("row_group_size")
+    pq.ParquetWriter(sink, full, **opts).close()
+    return ParquetFooter(data=sink.getvalue().to_pybytes())
 
 
 def _table(cols: dict[str, Any], schema: Any) -> Any:
@@ -127,7 +244,8 @@ class _Blocks:
     carries over); :meth:`block` returns the output row group of rows ``a:b`` as named
     Arrow arrays (the log's columns, then the monitor's)."""
 
-    def __init__(self, mon: Any, k: Any, log: Any, rows: int) -> None:
+    def __init__(self, mon: Any, k: Any, log: Any, rows: int, raw: set | None = None
+                 ) -> None:
         from grfguard.kernels import monitor as km
 
         log = log.copy(deep=False)
@@ -136,13 +254,19 @@ class _Blocks:
         self.new = [name for name, _, _ in km.output_rows(k)]
         self.src = [(km._column(log, c) if c in log.columns else None) for c in k.in_cols]
         # the log's own columns (those the monitor does not replace), converted once
-        self.keep = {c: _arrow(log[c]) for c in log.columns if c not in self.new}
+        self.raw = raw or set()  # (columns the caller writes itself: not in the blocks)
+        self.keep = {c: _arrow(log[c]) for c in log.columns
+                     if c not in self.new and c not in self.raw}
         self.order = [*log.columns, *(c for c in self.new if c not in log.columns)]
         self.bufs = km.chunk_buffers(k, min(_CHUNK, rows))
         self.Y = np.empty((len(k.out_cols), rows))  # each output column contiguous
+        self.n_float = sum(typ == "float" for _, typ, _ in km.output_rows(k))
         self.EX = np.empty((rows, km.N_EX))
 
-    def block(self, a: int, b: int) -> dict[str, Any]:
+    def block(self, a: int, b: int, keep: np.ndarray | None = None) -> dict[str, Any]:
+        """Rows ``a:b``. The float columns are views of the reused block buffer, or
+        with ``keep`` (``n_float`` rows of at least ``b - a`` columns) of copies into
+        ``keep``'s rows (they then outlive the next block)."""
         import pyarrow as pa
 
         km, k = self.km, self.k
@@ -151,9 +275,13 @@ class _Blocks:
         EX = self.EX[:m]
         km.run_rows(k, self.src, a, b, self.bufs, Y, EX)
         new: dict[str, Any] = {}
+        i = 0
         for name, typ, j in km.output_rows(k):
-            if typ == "float":
-                new[name] = _float_array(Y[:, j])
+            if typ == "float":  # (the other types are converted into new memory)
+                if keep is not None:
+                    keep[i, :m] = Y[:, j]
+                    i += 1
+                new[name] = _float_array(Y[:, j] if keep is None else keep[i - 1, :m])
             elif typ == "flag":
                 new[name] = pa.array(Y[:, j] != 0.0)
             elif typ == "kind":
@@ -166,7 +294,8 @@ class _Blocks:
                 part = self.log.iloc[a:b] if (EX[:, 0] != 0.0).any() else None
                 new[name] = _arrow(km._reasons(self.mon, part, Y[:, j].astype(np.int64),
                                                self.src[0][a:b], EX))
-        return {c: (new[c] if c in new else self.keep[c].slice(a, m)) for c in self.order}
+        return {c: (new[c] if c in new else self.keep[c].slice(a, m)) for c in self.order
+                if c not in self.raw}
 
 
 def _names(codes: np.ndarray, names: Any) -> Any:

@@ -750,7 +750,9 @@ def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
         elif math.isfinite(corrected[j]):
             tmp[n_known] = corrected[j]
             n_known += 1
-    known = _fsum(tmp, n_known, part)
+    # the exact sum of the known readings only when a sensor without information needs
+    # the rest of the total (``known`` is read nowhere else)
+    known = _fsum(tmp, n_known, part) if n_lack > 0 and math.isfinite(total) else 0.0
     a_fast = prm[P_AFAST]
     for i in range(8):
         s = ss[i]

