@@ -58,7 +58,8 @@ SETTINGS = (
     ("no angular momentum rate", {"use_angular_momentum": False}),
     ("attitude time constant 2 s", {"attitude_time_constant": 2.0}),
     *((f"damping {z:g}, 2nd order {c:g} Hz", {"filter_cutoff": c, "filter_damping": z})
-      for c, z in ((10.0, 0.5), (9.0, 0.5), (8.0, 0.5), (8.0, 0.4), (7.0, 0.4), (7.0, 0.3))),
+      for c, z in ((10.0, 0.5), (9.0, 0.5), (8.0, 0.5), (8.0, 0.45), (8.0, 0.4), (7.0, 0.4),
+                   (7.0, 0.3))),
 )
 H4 = np.array([[1, 1, 1, 1], [1, 1, -1, -1], [1, -1, 1, -1], [1, -1, -1, 1]], float) / 2
 
