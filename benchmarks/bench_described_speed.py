@@ -64,7 +64,7 @@ _COMPILED = wrench.estimate_wrenches
 #: Stage functions of :mod:`grfguard.estimate.wrench` timed (exclusive time; a missing
 #: name is skipped, so the script also times older sources).
 STAGES = {
-    "Savitzky-Golay filters": ("_deriv", "_derivs", "_deriv_many"),
+    "Savitzky-Golay filters": ("_deriv", "_derivs", "_deriv_many", "_smooth_long"),
     "first kinematics (`frames_batch`)": ("_body_frames_compiled", "_frames_omega_compiled"),
     "stance weights": ("_stance_weights",),
     "attitude (leveled)": ("_attitude",),

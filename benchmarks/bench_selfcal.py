@@ -54,79 +54,78 @@ from _common import update_section  # noqa: E402
 
 HEADER = "## Model self-calibration"
 READING = (
-    'Reading. With the weighed mass every target is met; the two rows missed are argued '
-    'below. What brought the gains within 1 % (2026-11-27): the calibration poses.\n\n* '
-    '**Gains relative to each other.** On a walk alone all eight cells stay off in the '
-    'twist pattern of each sole (corners 1 and 4 against 2 and 3; plain 60 s walks, seeds'
-    ' 1-3: 1.23, 1.25, 1.28 %): a flat sole on compliant ground carries a planar load, so'
-    ' the whole-body balance sees a twist only in the partial contacts at contact '
-    'changes, where its reference (the leg odometry; the accelerometer vibrates) is 1.1 N'
-    " RMS off in the fit's 2 Hz band, correlated with the right sole's twist (-0.68), and"
-    ' the ridge toward equal gains needed against that error pulls the true twist (+1.4 %'
-    ' per cell on the left sole) toward zero. Tried on the walk alone before '
-    '(2026-11-26), none below 1.16 % on seed 1 nor better than the odometry on seeds 2-3:'
-    ' samples away from contact changes, a reference anchored on the load-weighted corner'
-    ' heights (with the contact compliance fitted from the sole flatness or jointly with '
-    "the gains), blends of both, other odometry settings, the fit's band and ridge (1-4 "
-    'Hz x 0.003-0.03; 2 Hz, 0.01 kept). The poses give partial contacts while standing '
-    'still, where the reference is exact (nothing accelerates: the cells carry m g). '
-    '`estimate_corrections` finds them in the log alone: standing still = every joint '
-    'slower than 0.01 rad/s over 50 ms for 0.3 s or more, both feet planned in contact '
-    '(encoders only); when each foot has at least 1 s of it with a load far from planar '
+    'Reading. With the weighed mass every target is met but the per-corner ratio (2.02x, '
+    'bound 2); the rows missed are argued below. What brought the gains within 1 % (2026-'
+    '11-27): the calibration poses.\n\n* **Gains relative to each other.** On a walk alone '
+    'all eight cells stay off in the twist pattern of each sole (corners 1 and 4 against '
+    '2 and 3; plain 60 s walks, seeds 1-3: 1.23, 1.25, 1.28 %): a flat sole on compliant '
+    'ground carries a planar load, so the whole-body balance sees a twist only in the par'
+    'tial contacts at contact changes, where its reference (the leg odometry; the acceler'
+    "ometer vibrates) is 1.1 N RMS off in the fit's 2 Hz band, correlated with the right "
+    "sole's twist (-0.68), and the ridge toward equal gains needed against that error pul"
+    'ls the true twist (+1.4 % per cell on the left sole) toward zero. Tried on the walk '
+    'alone before (2026-11-26), none below 1.16 % on seed 1 nor better than the odometry '
+    'on seeds 2-3: samples away from contact changes, a reference anchored on the load-we'
+    'ighted corner heights (with the contact compliance fitted from the sole flatness or '
+    "jointly with the gains), blends of both, other odometry settings, the fit's band and"
+    ' ridge (1-4 Hz x 0.003-0.03; 2 Hz, 0.01 kept). The poses give partial contacts while'
+    ' standing still, where the reference is exact (nothing accelerates: the cells carry '
+    'm g). `estimate_corrections` finds them in the log alone: standing still = every joi'
+    'nt slower than 0.01 rad/s over 50 ms for 0.3 s or more, both feet planned in contact'
+    ' (encoders only); when each foot has at least 1 s of it with a load far from planar '
     "(`|f1 - f2 - f3 + f4|` over half the foot's load), every still 50 ms block joins the"
-    ' gain fit as a row with reference g, weighted 100 against a walking row, and the '
-    'ridge drops to 1e-4. Measured on seed 1: still-row weight 10: 0.27 %, 100: 0.22 %, '
-    "1000: 0.21 %; still rows alone: 0.36 %; the old fit on the poses' data (ridge 0.01, "
-    'no still rows): 0.68 %; tilting 3 deg instead of 2: 0.61 % (trunk tilt 6 deg, IMU '
-    'mounting 0.35 deg off). The poses must stay out of the flat-sole fits (IMU mounting,'
-    ' encoder offsets; with them in, the mounting is 11.8 deg off): samples whose two '
-    "soles' relative tilt (leg kinematics only) is more than 0.5 deg from its median, or "
-    'within 0.6 s of a relative tilt over 1 deg (the ramps into and out of a pose; '
-    'without that margin 0.40 deg off), are dropped there. On a walk no sample is dropped'
-    ' and no still row is posed: its calibration is bit-identical to before (the plain-'
-    'walk line below the table). The same data with a quiet accelerometer (gains gap '
-    "alone, seed 1): 0.22 % (walk alone 0.27 %).\n* **r2's recovery** was that gain error "
-    '(true / fitted gain 1.0118 on a 386 N mean stance load: 5.5 N): 2.16 N with the '
-    'poses.\n* **Per-corner threshold against the exact model.** Both thresholds have `h` '
-    'at its floor (30), so the ratio is that of the corner noise scales (0.0238 / '
-    '0.0101); 2x needs the robot at 0.604 or less. The accelerometer cannot be used (1.3 '
-    'm/s^2 RMS of vibration above 10 Hz); against the exact model with the same vibrating'
-    ' IMU, which is what calibration can correct toward, it is 1.14x (met). Measured '
-    '2026-11-27 (`python benchmarks/bench_selfcal_twin.py --write`, section "Model self-'
-    'calibration: per-corner noise of the accelerometer-free sensor"; single-support '
-    "residual split into each sole's total, pitch, roll and twist): the error is mostly "
-    "the sole's roll (the lateral ZMP), late: the twin's 10 Hz Butterworth delays the CoM"
-    " acceleration by about 22 ms, and the same residual with the sensor's corner forces "
-    'advanced 10 / 20 ms is 0.584 / 0.536 (1.93x / 1.78x; the accelerometer-fused exact '
-    "model's advanced alike: 0.278 / 0.320). Second, a sole twist the sensor gets wrong "
-    '(about 20 N RMS, from the encoder offsets left after calibration; the encoder gap '
-    'alone, uncalibrated, 56 N): with the true twist 0.645 (2.14x). Settings of the '
-    'accelerometer-free sensor (robot; vibrating IMU): Butterworth 10 Hz 0.715; 0.630 '
-    '(kept), 8 Hz 0.782, 9 Hz 0.740, 11 Hz 0.712; 0.636, third order 10 Hz 0.848, 14 Hz '
-    '0.726; 1.216, the pendulum Kalman ZMP 0.727; 0.754 (`com_acc_psd` 1: 0.774; 0.510), '
-    'attitude time constant 2 s 0.720, no angular-momentum rate 1.170; contact height 2-8'
-    ' mm, contact stiffness 2500-7000 N/(m kg) and `anchor_hold` change nothing '
-    '(0.715-0.716); the accelerometer fused only in a low band was measured worse before '
-    '(`QUIET_FILTER_CUTOFF_HZ`). Less lag at the same high-frequency roll-off needs a '
-    'second-order low-pass damped less than the Butterworth, which the compiled sensor '
-    'does not offer: a prototype (its filter design patched for the run) at 8 Hz gives '
-    '0.639 (2.12x) with damping 0.5 and 0.590 (1.95x) with 0.4, no false alarm on 4 min '
-    'of other walks of the robot (seeds 11-14, first four gaits) with the latter, but it '
-    "rings at the walk's transients: on the vibrating-IMU walk `h` rises to 58 (0.964), "
-    "so it would have to be chosen per robot on the calibration data, and the paper's "
-    'scenario with it is not measured. Nothing is changed: no existing setting reaches '
-    '2x; a damping setting of the compiled rate low-pass is the next step. Removing each '
-    "corner's mean residual would not help the ratio (calibrated 0.0199, exact 0.0079 "
-    'after it, measured before the poses). The thresholds are calibrated on the '
-    'calibration data itself, poses included (as `calibrate --model` does); on its walk '
-    'part alone they are the same (0.715, 0.107).\n* Without a weighed mass the forces are'
-    " in load-cell units: the mean gain's 1.4 % error (unknowable without weighing) goes "
-    'into the recovered force, 7.4 N (11.9 N before the poses); a weighing is needed for '
-    'the 5 N recovery bound.\n\nKept from earlier rounds: the vibrating accelerometer is '
-    'left out of the virtual sensor and its quiet twin low-passes the rates at 10 Hz '
-    "(`quiet_vfs_config`); of the fitted encoder offsets only each leg's net sole tilt is"
-    ' applied, on its ankle (joint by joint: 3.38x). The IMU mounting includes the '
-    'simulated per-walk attitude bias (0.11 deg per axis, 1 sigma).'
+    ' gain fit as a row with reference g, weighted 100 against a walking row, and the rid'
+    'ge drops to 1e-4. Measured on seed 1: still-row weight 10: 0.27 %, 100: 0.22 %, 1000'
+    ": 0.21 %; still rows alone: 0.36 %; the old fit on the poses' data (ridge 0.01, no s"
+    'till rows): 0.68 %; tilting 3 deg instead of 2: 0.61 % (trunk tilt 6 deg, IMU mounti'
+    'ng 0.35 deg off). The poses must stay out of the flat-sole fits (IMU mounting, encod'
+    "er offsets; with them in, the mounting is 11.8 deg off): samples whose two soles' re"
+    'lative tilt (leg kinematics only) is more than 0.5 deg from its median, or within 0.'
+    '6 s of a relative tilt over 1 deg (the ramps into and out of a pose; without that ma'
+    'rgin 0.40 deg off), are dropped there. On a walk no sample is dropped and no still r'
+    'ow is posed: its calibration is bit-identical to before (the plain-walk line below t'
+    'he table). The same data with a quiet accelerometer (gains gap alone, seed 1): 0.22 '
+    "% (walk alone 0.27 %).\n* **r2's recovery** was that gain error (true / fitted gain 1"
+    '.0118 on a 386 N mean stance load: 5.5 N): 2.16 N with the poses.\n* **Per-corner thr'
+    'eshold against the exact model: 2.02x, missed by 1 %** (2.37x with the 10 Hz Butterw'
+    'orth before). Both thresholds have `h` at its floor (30), so the ratio is that of th'
+    'e corner noise scales (0.0204 / 0.0101); 2x needs the robot at 0.604 or less. The ac'
+    'celerometer cannot be used (1.3 m/s^2 RMS of vibration above 10 Hz); against the exa'
+    'ct model with the same vibrating IMU, which is what calibration can correct toward, '
+    "it is 0.97x (met). The error is mostly the lag of the accelerometer-free sensor's ra"
+    'te low-pass on the CoM acceleration (`python benchmarks/bench_selfcal_twin.py`, sect'
+    'ion "Model self-calibration: per-corner noise of the accelerometer-free sensor": the'
+    " 10 Hz Butterworth's corner forces advanced 10 / 20 ms give 1.93x / 1.78x), second a"
+    ' sole twist the sensor gets wrong (encoder offsets left after calibration; with the '
+    'true twist 2.14x). `calibrate --model` now chooses that low-pass on the calibration '
+    'data (`grfguard.calib.choose_twin_filter`, `VFSConfig.filter_damping`; the line belo'
+    'w the table): 8 Hz with damping 0.45 (low-frequency delay 17.9 ms instead of 22.5). '
+    'Damped less, the calibration data measure lower still (8 Hz 0.42: 0.597, 1.98x; 0.4:'
+    ' 0.590, 1.95x; 7 Hz 0.3: 0.563, 1.86x), but the filter rings at the transients of ot'
+    'her gaits, which the calibration walk does not show: alarm episodes on these 10 min '
+    'of other walks with 8 Hz 0.4: 4, 7 Hz 0.4: 5, 7 Hz 0.35: 7, 7 Hz 0.3: 20; with dampi'
+    'ng 0.45 or more: 0. So the grid stops at 0.45 (`TWIN_FILTER_GRID`), and the 2x bound'
+    ' is missed by 1 % rather than met without margin against false alarms. Other seeds ('
+    '`python benchmarks/bench_selfcal.py --minutes 10 --seed N`, same day): seed 2 choose'
+    's 8 Hz 0.45, 0.620 / 0.313 = 1.98x (met); on seed 3 every damped setting rings on th'
+    'e calibration data itself (`h` 35-52), the Butterworth is kept, 0.732 / 0.488 = 1.50'
+    "x (met: the exact model's `h` rises on that seed too); both with 0 false alarms on 1"
+    "0 min of other walks and the paper's scenario within its bounds (delays 0.024 / 0.32"
+    '1 / 0.485 / 0.321 s and 0.024 / 0.321 / 0.483 / 0.321 s; recovery 2.14 / 3.46 / 2.02'
+    ' N and 2.11 / 3.48 / 2.01 N). Earlier settings tried (robot; vibrating IMU): Butterw'
+    'orth 8, 9, 11 Hz, third order, the pendulum Kalman ZMP, attitude time constant, cont'
+    'act height and stiffness, `anchor_hold`: none below 0.712 (the twin section). Removi'
+    "ng each corner's mean residual would not help the ratio (calibrated 0.0199, exact 0."
+    '0079 after it, measured before the poses). The thresholds are calibrated on the cali'
+    'bration data itself, poses included (as `calibrate --model` does).\n* Without a weigh'
+    "ed mass the forces are in load-cell units: the mean gain's 1.4 % error (unknowable w"
+    'ithout weighing) goes into the recovered force, 7.4 N (11.9 N before the poses); a w'
+    'eighing is needed for the 5 N recovery bound.\n\nKept from earlier rounds: the vibrati'
+    'ng accelerometer is left out of the virtual sensor and its quiet twin low-passes the'
+    ' rates at 10 Hz (`quiet_vfs_config`; the corrected monitor runs the low-pass `calibr'
+    "ate --model` chose); of the fitted encoder offsets only each leg's net sole tilt is "
+    'applied, on its ankle (joint by joint: 3.38x). The IMU mounting includes the simulat'
+    'ed per-walk attitude bias (0.11 deg per axis, 1 sigma).'
 )
 
 PAPER_FAULTS = ("r1=frozen:0@5", "r2=offset:100@5", "r3=drift:15@5", "r4=offset:-100@5")

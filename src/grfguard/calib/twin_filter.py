@@ -11,7 +11,10 @@ robot. So :func:`choose_twin_filter` tries a small grid of (cut-off, damping) on
 corrected calibration data itself and keeps the one with the lowest calibrated per-corner
 threshold ``sigma * h`` (a ringing filter raises ``h``: the fault-free CUSUM peaks grow),
 if it beats the default quiet twin by a margin and does not raise the foot-total
-threshold. Only the calibration logs are read (never a simulation's truth).
+threshold. Only the calibration logs are read (never a simulation's truth). The grid
+stops at damping 0.45: how much a filter rings on gaits unlike the calibration walk is
+invisible in the calibration data, and below that it rang on other walks of the
+all-gaps robot (:data:`TWIN_FILTER_GRID`).
 """
 
 from __future__ import annotations

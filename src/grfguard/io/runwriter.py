@@ -9,6 +9,12 @@ reused. The file holds the same columns, in the same order, with the same Arrow 
 values, nulls and metadata as the frame path (``tests/test_run_io.py`` compares the two
 files column by column); only the row groups differ (one per block).
 
+Given the Parquet file the log was read from (``source``), the log's unchanged columns
+are instead copied from it column chunk by column chunk (:mod:`grfguard.io.splice`),
+the monitor's columns encoded with the file's row groups (``tests/test_splice.py``
+compares with the frame path); a simulated log's ground truth need not even be read
+(:func:`copy_only_columns`).
+
 Everything the frame path does per column is repeated here: a NaN of a float column is
 written as a null (as :meth:`pyarrow.Table.from_pandas` does), the log's own columns
 keep their types (non-float ones converted by ``from_pandas``), the output columns that
