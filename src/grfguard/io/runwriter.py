@@ -9,6 +9,12 @@ reused. The file holds the same columns, in the same order, with the same Arrow 
 values, nulls and metadata as the frame path (``tests/test_run_io.py`` compares the two
 files column by column); only the row groups differ (one per block).
 
+Given the Parquet file the log was read from (``source``), the log's unchanged columns
+are instead copied from it column chunk by column chunk (:mod:`grfguard.io.splice`),
+the monitor's columns encoded with the file's row groups (``tests/test_splice.py``
+compares with the frame path); a simulated log's ground truth need not even be read
+(:func:`copy_only_columns`).
+
 Everything the frame path does per column is repeated here: a NaN of a float column is
 written as a null (as :meth:`pyarrow.Table.from_pandas` does), the log's own columns
 keep their types (non-float ones converted by ``from_pandas``), the output columns that
@@ -19,6 +25,7 @@ plus ``monitor`` (:meth:`grfguard.pipeline.Monitor.describe`) under the key
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 from pathlib import Path
@@ -232,26 +239,33 @@ def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dic
     with atomic_path(Path(path), what="log") as tmp, open(tmp, "wb", buffering=0) as fh:
         sp = Splicer(fh, footer)
         writer = schema = None
-        a = 0
-        for g, m in enumerate(footer.rows_per_group()):
-            keep = np.empty((blocks.n_float, m))  # the group's float columns, held
-            parts = [blocks.block(s, min(a + m, s + rows), keep=keep[:, s - a:])
-                     for s in range(a, a + m, rows)]
-            if writer is None:
-                schema = pa.schema([pa.field(c, x.type) for c, x in parts[0].items()])
-                opts = parquet_options(schema)
-                opts.pop("row_group_size")
-                writer = pq.ParquetWriter(sp.sink, schema, **opts)
-            table = pa.Table.from_arrays([pa.chunked_array([p[c] for p in parts], f.type)
-                                          for c, f in zip(schema.names, schema, strict=True)],
-                                         schema=schema)
-            del parts
-            sp.copy_group(g, raw)
-            writer.write_table(table, row_group_size=m)
-            del table
-            a += m
-        sp.sink.hold()
-        writer.close()
+        try:
+            a = 0
+            for g, m in enumerate(footer.rows_per_group()):
+                keep = np.empty((blocks.n_float, m))  # the group's float columns, held
+                parts = [blocks.block(s, min(a + m, s + rows), keep=keep[:, s - a:])
+                         for s in range(a, a + m, rows)]
+                if writer is None:
+                    schema = pa.schema([pa.field(c, x.type) for c, x in parts[0].items()])
+                    opts = parquet_options(schema)
+                    opts.pop("row_group_size")
+                    writer = pq.ParquetWriter(sp.sink, schema, **opts)
+                table = pa.Table.from_arrays(
+                    [pa.chunked_array([p[c] for p in parts], f.type)
+                     for c, f in zip(schema.names, schema, strict=True)], schema=schema)
+                del parts
+                sp.copy_group(g, raw)
+                writer.write_table(table, row_group_size=m)
+                del table
+                a += m
+            sp.sink.hold()
+            writer.close()
+        finally:  # (on failure: the writer closed into memory, not into the dropped file)
+            sp.close()
+            if writer is not None and sp.sink.held is None:
+                sp.sink.hold()
+                with contextlib.suppress(Exception):
+                    writer.close()
         types = {**types, **{f.name: f.type for f in schema}}
         sp.finish(_template(blocks.order, types, metadata), blocks.order)
 
