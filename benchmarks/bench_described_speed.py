@@ -85,10 +85,10 @@ scalar libm calls, 0.6 µs of it); the first kinematics 0.5 (was 0.9: the same s
 the products after it compiled); attitude 0.1 and base motion 0.2 (were 0.3 and 0.5:
 compiled with numpy's own operation order, bit-identical); the rest of
 `estimate_wrenches` 0.4; the channel monitor 0.7; the frame assembly of
-`with_described_vfs` 0.05 (was 0.45: one `pd.concat`). Unchanged by this work and
-faster in the "after" column because main moved on meanwhile (merged into the branch):
-G1's corner monitor + tracking (4.2 -> 2.1) and probably part of the channel monitor row
-(0.85 -> 0.66; its code did not change here, the load did).
+`with_described_vfs` 0.05 (was 0.45: one `pd.concat`). Not this work: G1's corner
+monitor + tracking (4.2 -> 2.1: main's compiled monitor loop changed meanwhile, merged
+into the branch, plus the load) and the channel monitor (0.85 -> 0.66: its code did not
+change, the load did); the whole-run rows include those.
 
 Outputs (last column): 1.9e-12 N (Talos), 3.6e-12 N (G1) against the "before" sources,
 flags and kinds identical. Two changes move the last bits on purpose (OUTPUT-BITS
