@@ -230,3 +230,27 @@ def test_copy_only_columns_refuses_other_files(walk, tmp_path) -> None:
     csv = tmp_path / "x.csv"
     csv.write_text("time\n0\n")
     assert copy_only_columns(csv) == []
+
+
+def test_corrupted_copy_falls_back_to_encoding(walk, tmp_path, monkeypatch) -> None:
+    """A copied chunk whose bytes come out wrong (here: zeros) fails the read-back check
+    before the file replaces the output: ``write_run`` writes nothing, warns, and says
+    so (None: ``grfguard run`` then encodes every column through the frame path); an
+    existing output is left as it was."""
+    from grfguard.errors import GrfguardWarning
+    from grfguard.io import splice
+
+    src, _ = walk
+
+    def zeros(dst, fh, start, n, what) -> None:
+        splice._write_all(dst, memoryview(bytes(n)))
+
+    monkeypatch.setattr(splice, "_copy_range", zeros)
+    log = read_log(src, copy=False)
+    out = tmp_path / "out.parquet"
+    write_log(log.iloc[:10], out)  # an existing output: must be left as it was
+    before = out.read_bytes()
+    with pytest.warns(GrfguardWarning, match="every column is encoded again"):
+        assert write_run(Monitor.for_log(log), log, out, source=src) is None
+    assert out.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["out.parquet"]  # no temporary left
