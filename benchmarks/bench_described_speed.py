@@ -64,7 +64,7 @@ _COMPILED = wrench.estimate_wrenches
 #: Stage functions of :mod:`grfguard.estimate.wrench` timed (exclusive time; a missing
 #: name is skipped, so the script also times older sources).
 STAGES = {
-    "Savitzky-Golay filters": ("_deriv", "_derivs", "_deriv_many"),
+    "Savitzky-Golay filters": ("_deriv", "_derivs", "_deriv_many", "_smooth_long"),
     "first kinematics (`frames_batch`)": ("_body_frames_compiled", "_frames_omega_compiled"),
     "stance weights": ("_stance_weights",),
     "attitude (leveled)": ("_attitude",),
@@ -75,35 +75,37 @@ STAGES = {
 
 #: Analysis written with the figures (by hand; re-runs keep it).
 NOTES = """
-Where the time goes now (Talos, "after" column of the first table): `run_described` 7.6
-µs per sample (132 k samples/s; was 21.6 in this run, 19.2 in the run below): the
-Savitzky-Golay filters 2.3 (bit-identical to scipy); the inverse dynamics 2.5 (for a
-tree of hinges the stage runs `grfguard.kernels.rne.hinge_wrench_batch`: every fixed
-body merged into its moving parent, Talos 60 bodies -> 33, G1 39 -> 30; each hinge and
-offset folded into one branch-free rotation `B0 + c B1 + s B2`; base axes about the base
-origin; one pass per stage over the bodies; other trees keep `wrench_batch`); the first
-kinematics 0.8 (`hinge_frames_batch` over the 12 leg bodies only); the channel monitor
-0.7; base motion 0.6; the leveled attitude 0.4 (closed-form polar factor instead of the
-SVD); the rest about 1. On this VM the per-body branches cost most: a pose pass with a
-3-way branch per body measured 4.7 µs/sample, the branch-free one a fraction of that.
+Where the time goes now (Talos, "after" column of the first table; branch `h11talos`,
+"before" = 1e9c789, main at the start of that work): `run_described` 5.6 µs per sample
+(178 k samples/s; 7.6 before in this run, at load 8): the Savitzky-Golay filters 1.7
+(were 2.5: weights cached, each edge fitted once for all orders, outputs written in
+place, the blend's 1001-tap window by FFT); the inverse dynamics 1.9 (was 2.8: the
+joints' sin/cos from a vectorised fdlibm kernel over blocks of 64 samples instead of
+scalar libm calls, 0.6 µs of it); the first kinematics 0.5 (was 0.9: the same sin/cos,
+the products after it compiled); attitude 0.1 and base motion 0.2 (were 0.3 and 0.5:
+compiled with numpy's own operation order, bit-identical); the rest of
+`estimate_wrenches` 0.4; the channel monitor 0.7; the frame assembly of
+`with_described_vfs` 0.05 (was 0.45: one `pd.concat`). Not this work: G1's corner
+monitor + tracking (4.2 -> 2.1: main's compiled monitor loop changed meanwhile, merged
+into the branch, plus the load) and the channel monitor (0.85 -> 0.66: its code did not
+change, the load did); the whole-run rows include those.
 
-Outputs (last column): 5.4e-6 N (Talos), 2.4e-6 N (G1) against the "before" sources, on
-purpose: `rotations.rotation_to_quat` took a square root per component and put up to
-about 1e-8 rad of attitude error into samples where a component is near zero; it is now
-Shepperd's method (round trip within 2e-15) and the compiled wrenches take the attitude
-as the matrix it is. Flags and kinds identical; `bench_described_monitor.py
---clean-walks 10 --no-write`: all 24 rows of "Monitoring Talos and G1" identical;
-`grfguard demo`: every number unchanged. Without the attitude change the new kernels
-move the outputs by at most 1.6e-12 N.
+Outputs (last column): 1.9e-12 N (Talos), 3.6e-12 N (G1) against the "before" sources,
+flags and kinds identical. Two changes move the last bits on purpose (OUTPUT-BITS
+commits): the sin/cos kernel (within 1 ulp of libm for joint angles) and the FFT blend
+(within 2e-15 of the signal's scale of the direct sum); everything else is
+bit-identical. `bench_described_monitor.py --clean-walks 10 --no-write`: all 21 rows of
+"Monitoring Talos and G1" identical. The SURALP default monitor (`grfguard demo`) does
+not use these paths.
 
 Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
-kinematics included): **not met**: 132 k samples/s for the whole Talos monitor (G1 94 k);
-the inverse dynamics alone runs at 395 k/s (Talos), 438 k/s (G1). 300 k/s is 3.3 µs per
-sample; left, in order of size: the filters (2.3 µs: 92 column filters of 101 taps; a
-recursive or FFT form would change the last bits), the inverse dynamics (2.5: the same
-poses are computed twice, in the first pass and in the dynamics; storing them costs
-memory per sample), the numpy assembly between the stages (~2 µs together: base motion,
-attitude, copies and transposes), the channel monitor 0.7.
+kinematics included): **not met**: 178 k samples/s for the whole Talos monitor (G1 149
+k); the virtual wrenches alone 207 k (Talos), 234 k (G1). 300 k/s is 3.3 µs per sample;
+left, in order of size: the inverse dynamics (1.9 µs: scalar code, about 11 k flops per
+sample; processing several samples side by side or with the lane index innermost did not
+vectorise under numba here), the filters (1.7: 89 columns x 101 taps in scipy's exact
+order; fusing the tap passes ran 2x slower, not vectorised), the channel monitor 0.7,
+the first kinematics 0.5, the rest 0.8.
 """
 
 

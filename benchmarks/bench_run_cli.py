@@ -13,8 +13,10 @@ once with ``grfguard simulate`` (or ``--log`` is used), then:
   (parameters, state, numba cache load of its loop: ``warm=False`` loads nothing
   else), then the run written block by block (:func:`grfguard.io.runwriter.write_run`)
   split into the compiled loop (``monitor_run_packed``), the Parquet writer
-  (``ParquetWriter``) and the rest (input columns, output columns as Arrow arrays);
-  best of ``--repeat``;
+  (``ParquetWriter``: the columns it encodes), the copy of the log's unchanged columns
+  from the input file (:class:`grfguard.io.splice.Splicer`: column chunks byte for byte)
+  and the rest (input columns, output columns as Arrow arrays, the footer); best of
+  ``--repeat``;
 * **Parquet options**: writing and reading the output table with earlier options (zstd
   level 3 with dictionaries tried on every column; byte-stream-split floats with zstd
   level 1 and dictionary-encoded text) and the current ones
@@ -85,8 +87,9 @@ t0 = time.process_time()
 import grfguard.cli as cli
 import grfguard.kernels.monitor as km
 import pyarrow.parquet as pq
+from grfguard.io.splice import Splicer
 marks = [("imports", time.process_time())]
-spent = {"kernel": 0.0, "parquet": 0.0}
+spent = {"kernel": 0.0, "parquet": 0.0, "copy": 0.0}
 def timed(fn, key):
     def run(*a, **k):
         t = time.process_time()
@@ -99,6 +102,7 @@ def timed(fn, key):
 km.monitor_run_packed = timed(km.monitor_run_packed, "kernel")
 pq.ParquetWriter.write_table = timed(pq.ParquetWriter.write_table, "parquet")
 pq.ParquetWriter.close = timed(pq.ParquetWriter.close, "parquet")
+Splicer.copy_group = timed(Splicer.copy_group, "copy")
 n = cli.run_log(__import__("pathlib").Path(sys.argv[1]), __import__("pathlib").Path(sys.argv[2]),
                 phase=lambda name: marks.append((name, time.process_time())))
 rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -112,8 +116,9 @@ PHASE_NAMES = {
     "monitor_setup": "`Monitor.for_log` (config, robot, kinematics)",
     "kernel_setup": "compiled monitor: parameters, state, numba cache load",
     "kernel": "compiled loop (`monitor_run_packed`)",
-    "frame": "input columns, output columns (Arrow arrays, text from codes)",
-    "write": "Parquet encoding + writing (`ParquetWriter`)",
+    "frame": "input columns, output columns (Arrow arrays, text from codes), footer",
+    "write": "Parquet encoding + writing of the output columns (`ParquetWriter`)",
+    "copy": "the log's unchanged columns copied from the input file (`Splicer`)",
 }
 
 
@@ -148,7 +153,8 @@ def _phases(log: Path, out: Path, prefix: list[str]) -> dict[str, float]:
     run = ph.pop("run_write")  # the monitor writes its output block by block
     ph["kernel"] = data["kernel"]
     ph["write"] = data["parquet"]
-    ph["frame"] = run - data["kernel"] - data["parquet"]
+    ph["copy"] = data["copy"]
+    ph["frame"] = run - data["kernel"] - data["parquet"] - data["copy"]
     ph["total"] = prev
     ph["rss_mb"] = data["rss_kb"] / 1024
     ph["n"] = data["n"]
@@ -263,7 +269,7 @@ def main() -> None:
         "|---|---:|",
     ]
     for key in ("imports", "read", "checks", "monitor_setup", "kernel_setup", "kernel", "frame",
-                "write"):
+                "write", "copy"):
         lines.append(f"| {PHASE_NAMES[key]} | {ph[key]:.2f} |")
     lines += [
         f"| **total** | **{ph['total']:.2f}** |",

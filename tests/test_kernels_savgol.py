@@ -79,3 +79,17 @@ def test_virtual_wrenches_same_bits_as_with_scipy_filters(talos, monkeypatch) ->
     np.testing.assert_array_equal(got.ground, want.ground)
     for k in want.sensor:
         np.testing.assert_array_equal(got.sensor[k], want.sensor[k], err_msg=k)
+
+
+@pytest.mark.parametrize("win", [101, 1001])
+def test_fft_interior_equals_direct_sum(signals, win) -> None:
+    """``fft=True`` (the blend's long window): the interior within 1e-13 of the signal's
+    scale of the direct (scipy-exact) sum, the polynomial edges bit for bit."""
+    h = win // 2
+    for o, (d, f) in enumerate(zip(savgol_many(signals, win, (0, 1, 2), 0.001),
+                                   savgol_many(signals, win, (0, 1, 2), 0.001, fft=True),
+                                   strict=True)):
+        assert np.abs(f - d).max() <= 1e-13 * np.abs(d).max(), o
+        np.testing.assert_array_equal(f[:h], d[:h])
+        np.testing.assert_array_equal(f[-h:], d[-h:])
+        assert f.shape == d.shape and f.flags.c_contiguous

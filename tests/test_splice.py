@@ -168,3 +168,65 @@ def test_run_log_copies_only_a_log_read_as_it_is(walk, tmp_path) -> None:
     out2 = tmp_path / "plain_out.parquet"
     assert run_log(path, out2) == len(log)
     assert pq.read_table(out2)["true_force_r1"].equals(pq.read_table(path)["true_force_r1"])
+
+
+def test_run_log_copies_the_truth_unread(walk, tmp_path, monkeypatch) -> None:
+    """A simulated log's ``true_*`` columns are not read by ``grfguard run`` (the monitor
+    never reads them) but copied into the output; when the block writer cannot copy them
+    (the paper method runs the Python stages, a CSV output) they are read after all:
+    every output has them, equal to the input's."""
+    from grfguard.cli import run_log
+    from grfguard.io.runwriter import copy_only_columns
+
+    path, log = walk
+    truth = [c for c in log.columns if c.startswith("true_") and log[c].dtype == float]
+    assert truth and copy_only_columns(path) == truth
+    asked: list = []
+    import grfguard.io.logio as logio
+
+    real = logio.load_log
+
+    def spy(*a, **k):
+        asked.append(k.get("columns"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(logio, "load_log", spy)
+    src = pq.read_table(path)
+    for kw, name in (({}, "a.parquet"), ({"method": "paper"}, "b.parquet"),
+                     ({}, "c.csv")):
+        out = tmp_path / name
+        asked.clear()
+        assert run_log(path, out, **kw) == len(log)
+        if name.endswith(".csv"):
+            assert asked == [None]  # a CSV output: everything read
+            back = read_log(out)
+            for c in truth:
+                assert np.array_equal(back[c].to_numpy(), log[c].to_numpy()), c
+            continue
+        assert asked and not set(truth) & set(asked[0])  # read without the truth
+        back = pq.read_table(out)
+        assert back.column_names[:len(src.column_names)] == src.column_names
+        for c in truth:
+            assert back[c].equals(src[c]), c
+    ref = tmp_path / "frame.parquet"
+    full = read_log(path, copy=False)
+    write_log(Monitor.for_log(full).run(full), ref)
+    a, b = pq.read_table(tmp_path / "a.parquet"), pq.read_table(ref)
+    assert a.schema.equals(b.schema, check_metadata=True)
+    assert not [c for c in b.column_names if not _same_bits(a[c], b[c])]
+
+
+def test_copy_only_columns_refuses_other_files(walk, tmp_path) -> None:
+    """Only a plain Parquet log written by grfguard: not a file without grfguard's
+    metadata (another writer may store NaN), not a CSV, not a missing file."""
+    path, log = walk
+    table = pq.read_table(path).replace_schema_metadata(None)
+    other = tmp_path / "other.parquet"
+    pq.write_table(table, other)
+    from grfguard.io.runwriter import copy_only_columns
+
+    assert copy_only_columns(other) == []
+    assert copy_only_columns(tmp_path / "missing.parquet") == []
+    csv = tmp_path / "x.csv"
+    csv.write_text("time\n0\n")
+    assert copy_only_columns(csv) == []

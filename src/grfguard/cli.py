@@ -283,6 +283,7 @@ def run_log(
     from grfguard._cliutil import check_log_plausible, robot_for_log
     from grfguard.io.anyread import is_bag, read_any
     from grfguard.io.logio import write_log
+    from grfguard.io.runwriter import copy_only_columns
     from grfguard.io.safe import check_output
 
     mark = phase if phase is not None else (lambda name: None)
@@ -294,12 +295,17 @@ def run_log(
         df = load_robot_log(log, robot)
         df.attrs.setdefault("robot_name", robot)
         df.attrs.setdefault("sensing", rob.sensing)
-        source = None
+        source, skip = None, []
     else:
-        df = read_any(log, topics_map, time_order=time_order, copy=False)  # read-only columns
-        # a Parquet log read as it is: its columns may be copied into the output unchanged
+        # a Parquet log read as it is: its columns may be copied into the output unchanged,
+        # its ground truth without being read (io/runwriter.py)
         plain = time_order == "strict" and log.suffix.lower() != ".csv" and not is_bag(log)
         source = log if plain else None
+        skip = (copy_only_columns(log) if plain and thresholds is None and compiled
+                and output.suffix.lower() != ".csv" else [])
+        names = _parquet_names(log) if skip else []
+        df = read_any(log, topics_map, time_order=time_order, copy=False,  # read-only columns
+                      columns=[c for c in names if c not in skip] if skip else None)
     mark("read")
     robot_for_log(df, rob, str(log))
     if unit_check:
@@ -308,7 +314,7 @@ def run_log(
     with _blas_probe_without_scipy_linalg():
         result = _run_segments(df, config=config, thresholds=thresholds, method=method,
                                vfs=vfs, compiled=compiled, mark=mark, output=output,
-                               source=source)
+                               source=source, skipped=skip)
     if isinstance(result, int):  # written block by block (io/runwriter.py)
         mark("run_write")
         return result
@@ -370,6 +376,12 @@ def _check_run_inputs(config: Path | None, thresholds: Path | None, robot: str |
     return resolve_robot(robot)
 
 
+def _parquet_names(path: Path) -> list[str]:
+    import pyarrow.parquet as pq
+
+    return list(pq.read_schema(path).names)
+
+
 def _run_segments(df: Any, **kw: Any) -> Any:
     """Run the monitor; a log read with ``time_order="split"`` runs segment by segment."""
     from grfguard.io.logio import SEGMENT
@@ -378,7 +390,7 @@ def _run_segments(df: Any, **kw: Any) -> Any:
         return _run_monitor(df, **kw)
     import pandas as pd
 
-    kw["output"] = kw["source"] = None
+    kw["output"] = kw["source"] = None  # (a split log: read whole, nothing skipped)
     parts = []
     for k, part in df.groupby(SEGMENT, sort=False):
         seg = part.drop(columns=[SEGMENT]).reset_index(drop=True)
@@ -401,16 +413,22 @@ def _run_monitor(
     mark: Any = None,
     output: Path | None = None,
     source: Path | None = None,
+    skipped: list[str] | None = None,
 ) -> Any:
     """The monitor's output frame of ``df``; with ``output`` (a Parquet path) the compiled
     monitor writes it there block by block and the number of rows is returned instead
     (:func:`grfguard.io.runwriter.write_run`; the frame when it runs the Python stages).
     ``source``: the Parquet file ``df`` was read from as it is (its unchanged columns are
-    then copied into ``output``), or None."""
+    then copied into ``output``), or None; ``skipped``: columns of ``source`` that
+    ``df`` was read without (copied by the writer, else read now)."""
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
     from grfguard.estimate.described import is_described, run_described
+    from grfguard.io.runwriter import restore_columns
 
+    batch = output is not None and output.suffix.lower() != ".csv"
+    if skipped and (is_described(df) or thresholds is not None or not batch):
+        df = restore_columns(df, source, skipped)  # (only the block writer copies them)
     if is_described(df) and df.attrs.get("sensing") == "ft":  # channel thresholds (issue 9)
         return run_described(df, channels=thresholds)
     cfg = monitor_config(config, thresholds, method, vfs)
@@ -423,16 +441,17 @@ def _run_monitor(
 
         df, cfg = corrected_log_and_config(df, thresholds, cfg)
         source = None  # (corrected sensor columns)
-    batch = output is not None and output.suffix.lower() != ".csv"
     mon = Monitor.for_log(df, config=cfg, warm=not batch)  # batch: loads only its loop
     if mark is not None:
         mark("monitor_setup")
     if batch:
         from grfguard.io.runwriter import write_run
 
-        n = write_run(mon, df, output, phase=mark, source=source)
+        n = write_run(mon, df, output, phase=mark, source=source, partial=bool(skipped))
         if n is not None:
             return n
+    if skipped:  # the frame path writes every column
+        df = restore_columns(df, source, skipped)
     return mon.run(df)
 
 

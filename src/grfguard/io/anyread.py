@@ -24,12 +24,12 @@ def is_bag(path: str | Path) -> bool:
 
 def read_any(
     path: str | Path, topics_map: str | Path | None = None, time_order: str = "strict",
-    copy: bool = True,
+    copy: bool = True, columns: list[str] | None = None,
 ) -> pd.DataFrame:
     """The log in ``path``: a ROS bag (rosbag2 directory, ``.mcap``, ``.db3``, ROS 1
     ``.bag``) imported with ``topics_map`` (default: the example map), else a Parquet/CSV
-    log read with :func:`grfguard.io.logio.load_log` (``time_order`` and ``copy`` as
-    there).
+    log read with :func:`grfguard.io.logio.load_log` (``time_order``, ``copy`` and
+    ``columns`` as there).
 
     Raises:
         ConfigError: A topics map was given for a file that is not a bag.
@@ -55,4 +55,4 @@ def read_any(
         )
     from grfguard.io.logio import load_log
 
-    return load_log(p, time_order=time_order, copy=copy)
+    return load_log(p, time_order=time_order, copy=copy, columns=columns)

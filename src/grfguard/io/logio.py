@@ -610,15 +610,17 @@ def _first_non_number(col: pd.Series) -> str:
     return f" (row {int(bad[0])} holds {_short(repr(col.iloc[bad[0]]), 40)})"
 
 
-def load_log(path: str | Path, time_order: str = "strict", copy: bool = True) -> pd.DataFrame:
+def load_log(path: str | Path, time_order: str = "strict", copy: bool = True,
+             columns: Iterable[str] | None = None) -> pd.DataFrame:
     """Read a log (Parquet or CSV) for the virtual sensor and monitor.
 
     Checks that the input columns of the log contract are present (``time``, IMU,
-    joint encoders, force sensors); timestamps and ``copy`` as in :func:`read_log`.
+    joint encoders, force sensors); timestamps, ``copy`` and ``columns`` (of a Parquet
+    file; None: all) as in :func:`read_log`. A described robot's log is read whole.
     """
     from grfguard.io.robot_schema import is_described_log, load_robot_log
 
-    df = read_log(path, time_order=time_order, copy=copy)
+    df = read_log(path, time_order=time_order, copy=copy, columns=columns)
     if is_described_log(df):  # Talos, G1, ...: columns from the robot description
         return load_robot_log(path)
     validate_log(df, required=REQUIRED_INPUT_COLUMNS, where=str(path))

@@ -9,6 +9,12 @@ reused. The file holds the same columns, in the same order, with the same Arrow 
 values, nulls and metadata as the frame path (``tests/test_run_io.py`` compares the two
 files column by column); only the row groups differ (one per block).
 
+Given the Parquet file the log was read from (``source``), the log's unchanged columns
+are instead copied from it column chunk by column chunk (:mod:`grfguard.io.splice`),
+the monitor's columns encoded with the file's row groups (``tests/test_splice.py``
+compares with the frame path); a simulated log's ground truth need not even be read
+(:func:`copy_only_columns`).
+
 Everything the frame path does per column is repeated here: a NaN of a float column is
 written as a null (as :meth:`pyarrow.Table.from_pandas` does), the log's own columns
 keep their types (non-float ones converted by ``from_pandas``), the output columns that
@@ -19,6 +25,7 @@ plus ``monitor`` (:meth:`grfguard.pipeline.Monitor.describe`) under the key
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 from pathlib import Path
@@ -37,7 +44,8 @@ _CHUNK = 1 << 12
 
 
 def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
-              phase: Any = None, source: str | Path | None = None) -> int | None:
+              phase: Any = None, source: str | Path | None = None,
+              partial: bool = False) -> int | None:
     """Run ``mon`` (a :class:`~grfguard.pipeline.Monitor`, reset first) over ``log`` and
     write the output to the Parquet file ``path`` (atomically, as
     :func:`~grfguard.io.logio.write_log`), block by block.
@@ -50,11 +58,14 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
     log's columns that the output keeps as they are (not replaced by the monitor's;
     numbers and booleans without NaN or null, of the file's type) are then copied from
     it byte for byte instead of being encoded again (:func:`_write_spliced`); the file
-    read back is the same. A file that does not qualify is ignored.
+    read back is the same. A file that does not qualify is ignored. ``partial``: ``log``
+    was read without some of the file's columns (:func:`copy_only_columns`), which are
+    then copied too, in their place; if they cannot be, nothing is written (None).
 
     Returns:
         The number of rows written, or None (nothing written) when the monitor does not
-        run compiled: then ``write_log(mon.run(log), path)`` is the way.
+        run compiled (or ``partial`` and the columns cannot be copied): then
+        ``write_log(mon.run(log), path)`` is the way (with every column of the log).
 
     Raises:
         LogFormatError: ``time`` or a ``force_<s>`` column is missing.
@@ -78,11 +89,14 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
     meta = json.dumps(to_jsonable({**log.attrs, "monitor": mon.describe()}), sort_keys=True)
     metadata = {METADATA_KEY: meta.encode()}
     src = _splice_source(source, log, km, k) if source is not None and n else None
+    if src is None and partial:
+        return None
     try:
         if src is not None:
-            footer, raw = src
-            blocks = _Blocks(mon, k, log, max(1, min(rows, n)), raw=raw)
-            _write_spliced(blocks, footer, path, metadata, rows)
+            footer, types, columns = src
+            blocks = _Blocks(mon, k, log, max(1, min(rows, n)), raw=set(types),
+                             columns=columns)
+            _write_spliced(blocks, footer, path, metadata, rows, types)
         else:
             _write_blocks(_Blocks(mon, k, log, max(1, min(rows, n))), path, metadata, rows)
     except pa.ArrowException as exc:  # pragma: no cover - pyarrow wraps some OS errors
@@ -111,27 +125,90 @@ def _write_blocks(blocks: _Blocks, path: str | Path, metadata: dict, rows: int) 
                 writer.write_table(_table(blocks.block(a, min(n, a + rows)), schema))
 
 
-def _splice_source(source: str | Path, log: Any, km: Any, k: Any) -> tuple[Any, set] | None:
-    """The parsed footer of ``source`` and the log's columns to copy from it, or None
-    when nothing is copied (not a plain Parquet file, other rows, no such column)."""
+def _splice_source(source: str | Path, log: Any, km: Any, k: Any
+                   ) -> tuple[Any, dict[str, Any], list[str]] | None:
+    """What to copy from ``source``: its parsed footer, the columns to copy with their
+    Arrow types, and the log's columns in the file's order (those ``log`` was read
+    without included); None when nothing is copied (not a plain Parquet file, other
+    rows, no such column; a column ``log`` lacks that cannot be copied)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     from grfguard.io.splice import ParquetFooter, same_leaf_type
 
     try:
         footer = ParquetFooter(source)
         ok = footer.plain() and footer.num_rows == len(log) and all(footer.rows_per_group())
-    except (OSError, ValueError):
+        file_types = {f.name: f.type for f in pq.read_schema(source)} if ok else {}
+    except (OSError, ValueError, pa.ArrowException):
         return None
     if not ok:
         return None
     log = log.copy(deep=False)
     log.attrs = {}  # column access would deep-copy the metadata every time
     new = {name for name, _, _ in km.output_rows(k)}
-    leaves = set(footer.leaves)
-    raw = [c for c in log.columns if c in leaves and c not in new and _copyable(log[c])]
-    if raw:  # the copied pages must read as the output's schema says
-        template = _template(log, raw, {})
-        raw = [c for c in raw if same_leaf_type(footer.element(c), template.element(c))]
-    return (footer, set(raw)) if raw else None
+    leaves = footer.leaves
+    missing = [c for c in leaves if c not in log.columns]
+    if missing and ([c for c in leaves if c in log.columns] != list(log.columns)
+                    or any(c in new or file_types.get(c) != pa.float64() for c in missing)):
+        return None
+    types = {c: pa.from_numpy_dtype(log[c].dtype) for c in log.columns
+             if c in file_types and c not in new and _copyable(log[c])}
+    types.update((c, pa.float64()) for c in missing)
+    if not types:
+        return None
+    template = _template(list(types), types, {})  # the pages must read as the output says
+    same = {c for c in types if same_leaf_type(footer.element(c), template.element(c))}
+    if any(c not in same for c in missing):
+        return None
+    return footer, {c: t for c, t in types.items() if c in same}, (leaves if missing
+                                                                    else list(log.columns))
+
+
+def copy_only_columns(path: str | Path) -> list[str]:
+    """Columns of the Parquet log ``path`` that ``grfguard run`` need not read: the
+    ground truth of a simulated log (``true_*``: never an input of the monitor) as
+    64-bit floats in a plain Parquet file written by grfguard (whose writers store no
+    NaN, only nulls: copied unread, they read back as the frame path writes them), for
+    :func:`write_run` to copy (``partial=True``). Empty for anything else (a described
+    robot's log, another writer's file, no such column)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from grfguard.io.logio import METADATA_KEY
+    from grfguard.io.splice import ParquetFooter
+
+    try:
+        if not ParquetFooter(path).plain():
+            return []
+        schema = pq.read_schema(path)
+        meta = json.loads((schema.metadata or {}).get(METADATA_KEY, b"null"))
+    except (OSError, ValueError, pa.ArrowException):
+        return []
+    if not isinstance(meta, dict) or ("robot_name" in meta and "sensing" in meta):
+        return []
+    return [f.name for f in schema if f.name.startswith("true_") and f.type == pa.float64()]
+
+
+def restore_columns(log: Any, path: str | Path, names: list[str]) -> Any:
+    """``log`` (read from ``path`` without the columns ``names``) with them read and put
+    back in the file's order (metadata kept)."""
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from grfguard.io.logio import _read_parquet
+    from grfguard.io.schema import TIME
+
+    names = [c for c in names if c not in log.columns]
+    if not names:
+        return log
+    extra = _read_parquet(Path(path), names, copy=False)[0].drop(columns=[TIME])
+    file_order = pq.read_schema(path).names
+    out = pd.concat([log, extra], axis=1)
+    out = out[[c for c in file_order if c in out.columns]
+              + [c for c in out.columns if c not in file_order]]
+    out.attrs = dict(log.attrs)
+    return out
 
 
 def _copyable(col: Any) -> bool:
@@ -147,7 +224,7 @@ def _copyable(col: Any) -> bool:
 
 
 def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dict,
-                   rows: int) -> None:
+                   rows: int, types: dict[str, Any]) -> None:
     """The output with the columns ``blocks.raw`` copied from the file of ``footer`` and
     the others encoded by pyarrow, row group by row group of that file (each group's
     blocks held until it is written): :class:`grfguard.io.splice.Splicer`."""
@@ -162,43 +239,47 @@ def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dic
     with atomic_path(Path(path), what="log") as tmp, open(tmp, "wb", buffering=0) as fh:
         sp = Splicer(fh, footer)
         writer = schema = None
-        a = 0
-        for g, m in enumerate(footer.rows_per_group()):
-            keep = np.empty((blocks.n_float, m))  # the group's float columns, held
-            parts = [blocks.block(s, min(a + m, s + rows), keep=keep[:, s - a:])
-                     for s in range(a, a + m, rows)]
-            if writer is None:
-                schema = pa.schema([pa.field(c, x.type) for c, x in parts[0].items()])
-                opts = parquet_options(schema)
-                opts.pop("row_group_size")
-                writer = pq.ParquetWriter(sp.sink, schema, **opts)
-            table = pa.Table.from_arrays([pa.chunked_array([p[c] for p in parts], f.type)
-                                          for c, f in zip(schema.names, schema, strict=True)],
-                                         schema=schema)
-            del parts
-            sp.copy_group(g, raw)
-            writer.write_table(table, row_group_size=m)
-            del table
-            a += m
-        sp.sink.hold()
-        writer.close()
-        sp.finish(_template(blocks.log, blocks.order, metadata, schema), blocks.order)
+        try:
+            a = 0
+            for g, m in enumerate(footer.rows_per_group()):
+                keep = np.empty((blocks.n_float, m))  # the group's float columns, held
+                parts = [blocks.block(s, min(a + m, s + rows), keep=keep[:, s - a:])
+                         for s in range(a, a + m, rows)]
+                if writer is None:
+                    schema = pa.schema([pa.field(c, x.type) for c, x in parts[0].items()])
+                    opts = parquet_options(schema)
+                    opts.pop("row_group_size")
+                    writer = pq.ParquetWriter(sp.sink, schema, **opts)
+                table = pa.Table.from_arrays(
+                    [pa.chunked_array([p[c] for p in parts], f.type)
+                     for c, f in zip(schema.names, schema, strict=True)], schema=schema)
+                del parts
+                sp.copy_group(g, raw)
+                writer.write_table(table, row_group_size=m)
+                del table
+                a += m
+            sp.sink.hold()
+            writer.close()
+        finally:  # (on failure: the writer closed into memory, not into the dropped file)
+            sp.close()
+            if writer is not None and sp.sink.held is None:
+                sp.sink.hold()
+                with contextlib.suppress(Exception):
+                    writer.close()
+        types = {**types, **{f.name: f.type for f in schema}}
+        sp.finish(_template(blocks.order, types, metadata), blocks.order)
 
 
-def _template(log: Any, order: list[str], metadata: dict, written: Any = None) -> Any:
-    """The parsed footer of an empty Parquet file with the columns ``order``: those of
-    the ``written`` schema of their type there, the others (the log's copied columns)
-    of the type the frame path gives them."""
+def _template(order: list[str], types: dict[str, Any], metadata: dict) -> Any:
+    """The parsed footer of an empty Parquet file with the columns ``order`` of the
+    Arrow ``types`` and the schema ``metadata``, written with the output's options."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     from grfguard.io.logio import parquet_options
     from grfguard.io.splice import ParquetFooter
 
-    types = {f.name: f.type for f in written} if written is not None else {}
-    full = pa.schema([pa.field(c, types[c] if c in types else
-                               pa.from_numpy_dtype(log[c].dtype)) for c in order],
-                     metadata=metadata)
+    full = pa.schema([pa.field(c, types[c]) for c in order], metadata=metadata)
     sink = pa.BufferOutputStream()
     opts = parquet_options(full)
     opts.pop("row_group_size")
@@ -244,8 +325,8 @@ class _Blocks:
     carries over); :meth:`block` returns the output row group of rows ``a:b`` as named
     Arrow arrays (the log's columns, then the monitor's)."""
 
-    def __init__(self, mon: Any, k: Any, log: Any, rows: int, raw: set | None = None
-                 ) -> None:
+    def __init__(self, mon: Any, k: Any, log: Any, rows: int, raw: set | None = None,
+                 columns: list[str] | None = None) -> None:
         from grfguard.kernels import monitor as km
 
         log = log.copy(deep=False)
@@ -257,7 +338,8 @@ class _Blocks:
         self.raw = raw or set()  # (columns the caller writes itself: not in the blocks)
         self.keep = {c: _arrow(log[c]) for c in log.columns
                      if c not in self.new and c not in self.raw}
-        self.order = [*log.columns, *(c for c in self.new if c not in log.columns)]
+        cols = list(log.columns) if columns is None else columns  # (the file's, if given)
+        self.order = [*cols, *(c for c in self.new if c not in cols)]
         self.bufs = km.chunk_buffers(k, min(_CHUNK, rows))
         self.Y = np.empty((len(k.out_cols), rows))  # each output column contiguous
         self.n_float = sum(typ == "float" for _, typ, _ in km.output_rows(k))

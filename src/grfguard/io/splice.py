@@ -174,12 +174,17 @@ class Splicer:
         self.copied.append(out)
         self.shift.append(self.pos - self.sink.written)
 
+    def close(self) -> None:
+        """Close the source file (if open); the footer may still be written."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
     def finish(self, template: ParquetFooter, names: list[str]) -> None:
         """The footer: ``template``'s schema and metadata (an empty file of the output
         schema, columns ``names`` in order), each row group's chunks (copied, or the
         writer's, moved to where they lie)."""
-        if self._fh is not None:
-            self._fh.close()
+        self.close()
         side = ParquetFooter(data=_MAGIC + bytes(self.sink.held))
         rows = self.source.rows_per_group()
         if side.rows_per_group() != rows or len(self.copied) != len(rows):

@@ -142,9 +142,14 @@ def _fit_edges(xt: np.ndarray, win: int, polyorder: int, orders: tuple[int, ...]
 
 
 def savgol_many(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float,
-                polyorder: int = 3) -> list[np.ndarray]:
+                polyorder: int = 3, fft: bool = False) -> list[np.ndarray]:
     """``savgol_filter(x, win, polyorder, deriv=o, delta=dt, axis=0, mode="interp")`` of a
-    (T, m) array for every ``o`` in ``orders``, the same bits, in one pass."""
+    (T, m) array for every ``o`` in ``orders``, the same bits, in one pass.
+
+    ``fft=True``: the interior samples by FFT convolution (``scipy.signal.fftconvolve``)
+    instead of the direct sum: for long windows (1001 taps: about 10x cheaper), equal to
+    the direct sum to about 1e-15 of the signal's scale, not bit for bit; the edges are
+    unchanged."""
     x = np.asarray(x, float)
     if x.ndim != 2 or win % 2 == 0 or win > x.shape[0]:
         raise ValueError(f"savgol_many needs a (T, m) array and an odd window <= T, got "
@@ -152,7 +157,14 @@ def savgol_many(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float,
     W, sym = _weights(int(win), int(polyorder), tuple(int(o) for o in orders), float(dt))
     xt = np.ascontiguousarray(x.T)
     out = np.empty((len(orders),) + x.shape)
-    savgol_block(xt, W, sym, out)
+    if fft:
+        from scipy.signal import fftconvolve
+
+        h = win // 2
+        for i in range(len(orders)):  # y[k] = sum_j W[j] x[k - h + j]
+            out[i, h:x.shape[0] - h] = fftconvolve(x, W[i, ::-1, None], mode="valid", axes=0)
+    else:
+        savgol_block(xt, W, sym, out)
     _fit_edges(xt, win, polyorder, tuple(orders), dt, list(out))
     return list(out)
 
