@@ -100,6 +100,9 @@ def test_settings_variants_match(walk):
         VFSConfig(use_accelerometer=False, use_angular_momentum=False),
         VFSConfig(accelerometer_vertical=True, kinematic_contact=False, filter_order=3),
         VFSConfig(use_accelerometer=False, filter_cutoff=8.0, filter_damping=0.4),
+        VFSConfig(use_accelerometer=False, filter_lead=0.005),
+        VFSConfig(use_accelerometer=False, filter_cutoff=8.0, filter_damping=0.45,
+                  filter_lead=0.003),
     ):
         ref = PythonVFS.for_log(log, cfg).run(log)
         out = CompiledVirtualForceSensor.for_log(log, cfg).run(log)

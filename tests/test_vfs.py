@@ -55,6 +55,17 @@ def test_config_validation_and_toml_round_trip(tmp_path) -> None:
         VFSConfig(filter_damping=True)
     with pytest.raises(ConfigError, match="filter_order = 3; set filter_order = 2"):
         VFSConfig(filter_damping=0.5, filter_order=3)
+    lead = VFSConfig(filter_cutoff=10.0, filter_lead=0.005)
+    assert VFSConfig.from_toml(lead.to_toml()) == lead
+    assert "filter_lead" not in VFSConfig().to_toml()  # None: no lead
+    with pytest.raises(ConfigError, match=r"filter_lead = 0\.1 .*\[0\.0, 0\.05\]"):
+        VFSConfig(filter_lead=0.1)
+    with pytest.raises(ConfigError, match=r"filter_lead = -0\.001"):
+        VFSConfig(filter_lead=-0.001)
+    with pytest.raises(ConfigError, match="filter_lead must be a number"):
+        VFSConfig(filter_lead="5 ms")
+    with pytest.raises(ConfigError, match="filter_order = 3; set filter_order = 2"):
+        VFSConfig(filter_lead=0.005, filter_order=3)
 
 
 # ----------------------------------------------------------------------------- static

@@ -62,14 +62,16 @@ class CausalLowPass:
         n_channels: Number of channels filtered together.
         damping: Damping ratio of a second-order low-pass instead of the Butterworth
             (``VFSConfig.filter_damping``); None: Butterworth of ``order``.
+        lead: Phase lead [s] of that second-order low-pass (``VFSConfig.filter_lead``).
     """
 
     def __init__(self, cutoff_hz: float, dt_s: float, order: int, n_channels: int,
-                 damping: float | None = None) -> None:
+                 damping: float | None = None, lead: float | None = None) -> None:
         from grfguard._iir import butter_lowpass, damped_lowpass, lfilter_zi
 
-        if damping is not None:
-            b, a = damped_lowpass(cutoff_hz, 1.0 / dt_s, damping)
+        if damping is not None or lead:
+            b, a = damped_lowpass(cutoff_hz, 1.0 / dt_s,
+                                  2**-0.5 if damping is None else damping, lead or 0.0)
         else:
             b, a = butter_lowpass(order, cutoff_hz, 1.0 / dt_s)
         self.b, self.a = np.asarray(b, float), np.asarray(a, float)

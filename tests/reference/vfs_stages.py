@@ -361,7 +361,8 @@ class PythonVFS:
         c = self.config
         self._odo = LegOdometry(c.contact_height, c.dt, c.anchor_attitude_time_constant)
         self._att = AttitudeFilter(c.dt, c.attitude_time_constant)
-        self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 9, c.filter_damping)
+        self._lp = CausalLowPass(c.filter_cutoff, c.dt, c.filter_order, 9, c.filter_damping,
+                                 c.filter_lead)
         self._lp_fuse = CausalLowPass(c.fusion_cutoff, c.dt, c.filter_order, 3)
         self._lp_acc = CausalLowPass(c.acc_cutoff, c.dt, c.filter_order, 3)
         self._hist: dict[str, np.ndarray] = {"C": np.zeros((0, 3)), "I": np.zeros((0, 3))}

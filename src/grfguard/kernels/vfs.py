@@ -1197,8 +1197,11 @@ class VFSKernel:
         from grfguard._iir import butter_lowpass, damped_lowpass, lfilter_zi  # no scipy.signal
 
         for i, cut in enumerate((cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff)):
-            if i == 0 and cfg.filter_damping is not None:  # the rate low-pass, damped
-                b, a = damped_lowpass(cut, 1.0 / cfg.dt, cfg.filter_damping)
+            if i == 0 and (cfg.filter_damping is not None or cfg.filter_lead):
+                b, a = damped_lowpass(  # the rate low-pass, damped and/or with a lead
+                    cut, 1.0 / cfg.dt,
+                    2**-0.5 if cfg.filter_damping is None else cfg.filter_damping,
+                    cfg.filter_lead or 0.0)
             else:
                 b, a = butter_lowpass(cfg.filter_order, cut, 1.0 / cfg.dt)
             b, a = np.asarray(b, float), np.asarray(a, float)
