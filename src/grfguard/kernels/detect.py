@@ -205,7 +205,7 @@ def new_state() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------- exact sums
-@njit_nort
+@njit_nort(inline="always")
 def _fsum(vals, n, part):
     """``math.fsum(vals[:n])`` for finite values; ``part`` is scratch of at least ``n``
     floats.
@@ -281,13 +281,13 @@ def _fsum_exact(vals, n, part):
 
 
 # ---------------------------------------------------------------- gates
-@njit_nort
+@njit_nort(inline="always")
 def _expected_swing(gs, f):
     d = gs[G_SWD + f]
     return d if math.isfinite(d) else gs[G_SWD + 1 - f]
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _in_valid_swing(gs, prm, f, t):
     since = t - gs[G_LO + f]
     exp_sw = _expected_swing(gs, f)
@@ -295,7 +295,7 @@ def _in_valid_swing(gs, prm, f, t):
             and since <= exp_sw - prm[P_GBTD])
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, contact):
     """``ContactTimeline.step``: gates per foot (before the touchdown guard)."""
     for f in range(2):
@@ -332,7 +332,7 @@ def _timeline(gs, prm, t, cref, cest, tot, weight, swing_ok, ss_ok, loaded_ok, c
                                    and _in_valid_swing(gs, prm, o, t)) else 0.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _touchdown_guard(gs, prm, ss, f, t, x):
     """``ContactTimeline.touchdown_guard`` of foot ``f``."""
     if gs[G_GUARD + f] != 0.0:
@@ -351,7 +351,7 @@ def _touchdown_guard(gs, prm, ss, f, t, x):
 
 
 # ---------------------------------------------------------------- fits
-@njit_nort
+@njit_nort(inline="always")
 def _swing_fit(s):
     """``SwingFit.fit``: (a, b, sd, se)."""
     n = s[FN]
@@ -371,7 +371,7 @@ def _swing_fit(s):
     return a, b, sd, sd / math.sqrt(ctt)
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _swing_add(s, tau, x):
     s[FN] += 1.0
     s[FST] += tau
@@ -381,7 +381,7 @@ def _swing_add(s, tau, x):
     s[FSXX] += x * x
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _stance_add(s, res, load, factor):
     """``StanceFit.add``."""
     if not (math.isfinite(res) and math.isfinite(load)):
@@ -396,7 +396,7 @@ def _stance_add(s, res, load, factor):
     s[SETA] = res if math.isnan(e) else e + (res - e) * factor
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _add_swing_sample(s, prm, t, x):
     """``classify.add_swing_sample``."""
     sigma = prm[P_SIG]
@@ -413,7 +413,7 @@ def _add_swing_sample(s, prm, t, x):
 
 
 # ---------------------------------------------------------------- tests
-@njit_nort
+@njit_nort(inline="always")
 def _cusum2(a, ip, ineg, z, kappa):
     """Two-sided CUSUM step on ``a[ip]`` / ``a[ineg]`` (allowance ``kappa``, both clipped
     at 0); returns the larger of the two statistics."""
@@ -424,14 +424,14 @@ def _cusum2(a, ip, ineg, z, kappa):
     return max(a[ip], a[ineg])
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _is_comp(s):
     """``residual_tests.compensated``."""
     k = s[KIND]
     return s[FLAG] != 0.0 and (k == K_OFFSET or k == K_DRIFT) and s[SRC] == SRC_SWING
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, infoless):
     """``Detector._sensor_tests``: the alarm source code of one sensor."""
     if not math.isfinite(xi):
@@ -497,7 +497,7 @@ def _sensor_tests(s, prm, t, xi, vi, tot_f, weight, swing_ok, ss_ok, loaded_ok, 
     return alarm
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _foot_total(ss, gs, prm, f, x, v, tot_f, weight, alarms, corr, tmp, part):
     """``Detector._foot_total`` of foot ``f`` (gate open)."""
     for j in range(4):
@@ -573,7 +573,7 @@ def _foot_total(ss, gs, prm, f, x, v, tot_f, weight, alarms, corr, tmp, part):
 
 
 # ---------------------------------------------------------------- flag machine
-@njit_nort
+@njit_nort(inline="always")
 def _prio(src):
     if src == SRC_NAN:
         return 4
@@ -586,7 +586,7 @@ def _prio(src):
     return 0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _apply_alarm(s, a, t, x):
     """``Detector._apply_alarm``."""
     if s[FLAG] == 0.0:
@@ -606,7 +606,7 @@ def _apply_alarm(s, a, t, x):
     s[LA] = t
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _maybe_clear(s, prm, t, x, loaded):
     """``classify.maybe_clear``."""
     last = s[LA]
@@ -631,7 +631,7 @@ def _maybe_clear(s, prm, t, x, loaded):
         s[SWP] = s[SWN] = s[CP] = s[CN] = 0.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _classify(s, prm, t, x):
     """``classify.classify`` of a flagged sensor."""
     src = s[SRC]
@@ -689,7 +689,7 @@ def _classify(s, prm, t, x):
 
 
 # ---------------------------------------------------------------- recovery
-@njit_nort
+@njit_nort(inline="always")
 def _corrected(ss, prm, x, corrected, info, tmp):
     """``Recovery._corrected``: per sensor the corrected reading [N] and whether the
     reading carries information (1/0)."""
@@ -737,7 +737,7 @@ def _corrected(ss, prm, x, corrected, info, tmp):
             info[i] = 1.0
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _recover(ss, prm, x, v, tot, rec, eta, corrected, info, part, tmp):
     """``Recovery.step``: ``rec`` and ``eta`` of every sensor."""
     _corrected(ss, prm, x, corrected, info, tmp)

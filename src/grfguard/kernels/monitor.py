@@ -135,7 +135,7 @@ def output_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]
     return (*OUT_COLUMNS, *det) if with_vfs else det
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _input_guard(xin, xc, mp, lims):
     """``InputGuard.clean_row``: ``xc`` = ``xin`` with implausible values NaN; True when
     something was rejected."""
@@ -157,7 +157,7 @@ def _input_guard(xin, xc, mp, lims):
     return rejected
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _estimate(xin, xc, mode, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
     """The virtual sensor's outputs of the sample (compiled VFS, resynced after a break
     by the caller, or the row's precomputed columns); returns ``valid``
@@ -185,7 +185,7 @@ def _estimate(xin, xc, mode, v, tot, cest, cref, vstate, cf, ci, vws, viws, vy):
     return (flag == 1.0) if math.isfinite(flag) else fin
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     """``Monitor._prepare``: range check of the virtual forces (corners from ``P_VLO``,
     foot totals from ``2 P_FLO``), ``Continuity.after``, unusable virtual outputs set to
@@ -224,7 +224,7 @@ def _prepare(gs, prm, clock, st, reset, valid, v, tot, cest):
     return bounded, ST_OK
 
 
-@njit_nort
+@njit_nort(inline="always")
 def _finish(xin, yout, o, ss, prm, oflag, okind, eta, rec):
     """``Monitor._finish``: an implausible reading's flag reported as ``spikes``, the
     recovered force within the plausible range; writes the detector columns."""

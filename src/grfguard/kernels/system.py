@@ -154,7 +154,7 @@ def system_params(mon: Any, in_cols: tuple[str, ...], has_gyro: bool = True) -> 
 
 
 # ------------------------------------------------------------------ reset
-@njit
+@njit(inline="always")
 def _cm_reset(ys):
     """``CommonModeMonitor.reset``."""
     for k in range(S_ZSUM):
@@ -186,7 +186,7 @@ def _vfs_reset(state):
 
 
 # ------------------------------------------------------------------ before the VFS
-@njit
+@njit(inline="always")
 def _gyro_bias(yp, ys, xc):
     """``GyroBiasLearner.update``: learns, writes the bias applied now to ``ys[S_BIAS:]``."""
     ig = int(yp[Y_I_GYRO])
@@ -226,7 +226,7 @@ def _gyro_bias(yp, ys, xc):
         ys[S_BIAS + j] = ys[S_GSUM + j] / n
 
 
-@njit
+@njit(inline="always")
 def _tilt_solve(ys):
     """``ImuTiltLearner._solve`` into ``ys[S_TC:]`` (False: within the deadband)."""
     a, b, c = ys[S_TZ], ys[S_TZ + 1], ys[S_TZ + 2]
@@ -236,7 +236,7 @@ def _tilt_solve(ys):
     return ang, z0, z1
 
 
-@njit
+@njit(inline="always")
 def _tilt(yp, ys, xc, dt, cf, ci, vws, viws):
     """``ImuTiltLearner.update`` (the sole normals from the compiled forward kinematics)."""
     every = yp[Y_T_EVERY]
@@ -301,7 +301,7 @@ def _tilt(yp, ys, xc, dt, cf, ci, vws, viws):
     ys[S_TSET] = 1.0
 
 
-@njit
+@njit(inline="always")
 def _rotate_imu(yp, ys, xc):
     """``pipeline._rotate_imu``: the IMU readings in the described IMU frame."""
     C = ys[S_TC:S_TC + 9]
@@ -346,7 +346,7 @@ def _rotate_imu(yp, ys, xc):
         xc[base + 2] = C[6] * a0 + C[7] * a1 + C[8] * a2
 
 
-@njit
+@njit(inline="always")
 def sys_pre_vfs(yp, ys, xc, cf, ci, vws, viws):
     """Gyro bias and IMU tilt learned and removed from the cleaned row ``xc`` (in place;
     ``Monitor._unbias_row``)."""
@@ -374,7 +374,7 @@ def sys_pre_vfs(yp, ys, xc, cf, ci, vws, viws):
 
 
 # ------------------------------------------------------------------ vibration, twin VFS
-@njit
+@njit(inline="always")
 def _vibration(yp, ys, ax, ay):
     """``AccVibrationDetector.update``; returns ``on``."""
     if ys[S_VON] != 0.0:
@@ -401,7 +401,7 @@ def _vibration(yp, ys, ax, ay):
     return ys[S_VON] != 0.0
 
 
-@njit
+@njit(inline="always")
 def sys_twin_prepare(yp, ys, reset, vstate, qstate, ci):
     """Before the main sensor's step (after its resync): the twin resynced at a break as
     the main (finite differences only: it keeps its filters, attitude, odometry and last
@@ -424,7 +424,7 @@ def sys_twin_prepare(yp, ys, reset, vstate, qstate, ci):
     return same_front_state(vstate, qstate, ci)
 
 
-@njit
+@njit(inline="always")
 def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws, vstate, vws,
              v, tot, cest, o_tot, o_cest, o_valid):
     """The twin virtual sensor without the accelerometer (reset at a break by
@@ -460,7 +460,7 @@ def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws,
 
 
 # ------------------------------------------------------------------ before the detector
-@njit
+@njit(inline="always")
 def _zeros_update(yp, ys, ss, x, tot, cref, cest):
     """``SwingZeroLearner.update``; the zeros applied now into ``ys[S_ZERO:]``."""
     dt = yp[Y_DT]
@@ -497,7 +497,7 @@ def _zeros_update(yp, ys, ss, x, tot, cref, cest):
         ys[S_ZERO + i] = z if (ready and abs(z) > yp[Y_Z_DEAD] and abs(z) <= yp[Y_Z_LIMIT]) else 0.0
 
 
-@njit
+@njit(inline="always")
 def _swing_to_stance(x, v, tot, cref, weight, part):
     """``swing_load_to_stance`` (in place)."""
     if not (math.isfinite(cref[0]) and math.isfinite(cref[1])):
@@ -525,7 +525,7 @@ def _swing_to_stance(x, v, tot, cref, weight, part):
     tot[sw] = 0.0
 
 
-@njit
+@njit(inline="always")
 def _median(e, use, tmp):
     """``np.median`` of ``e`` where ``use`` (insertion sort in ``tmp``)."""
     n = 0
@@ -543,7 +543,7 @@ def _median(e, use, tmp):
     return (tmp[n // 2 - 1] + tmp[n // 2]) / 2.0
 
 
-@njit
+@njit(inline="always")
 def _cm_update(yp, ys, m, v, valid0, valid1, frozen, planned, part):
     """``CommonModeMonitor.update`` (its result in ``ys[S_CMCODE:]`` and
     ``ys[S_CORR:]``)."""
@@ -607,7 +607,7 @@ def _cm_update(yp, ys, m, v, valid0, valid1, frozen, planned, part):
     _cm_result(yp, ys, v, ok, phi)
 
 
-@njit
+@njit(inline="always")
 def _cm_learn(yp, ys, res, phi, use):
     """``CommonModeMonitor._learn``."""
     lam = yp[Y_CM_LAM]
@@ -655,12 +655,12 @@ def _cm_learn(yp, ys, res, phi, use):
         ys[S_TH + 2] = (m11 * r2 - m12 * r1) / det
 
 
-@njit
+@njit(inline="always")
 def _clip(q, lim):
     return min(max(q, -lim), lim)
 
 
-@njit
+@njit(inline="always")
 def _cm_result(yp, ys, v, ok, phi):
     """``CommonModeMonitor._result``: code, ratios, CoP shift, correction."""
     warm = ys[S_LOADED] >= yp[Y_CM_WARM]
@@ -696,7 +696,7 @@ def _cm_result(yp, ys, v, ok, phi):
         ys[S_CORR + i] = c
 
 
-@njit
+@njit(inline="always")
 def sys_pre_detect(yp, ys, ss, gs, x, v, tot, cref, cest, sd):
     """``Monitor._detect`` with ``common_mode`` up to the detector step: ``x`` (zeros
     removed), ``v`` and ``tot`` (moved and corrected) edited in place, the unarmed tests'
@@ -751,7 +751,7 @@ def sys_pre_detect(yp, ys, ss, gs, x, v, tot, cref, cest, sd):
                 sd[SD_STAGE + i] = 0.0
 
 
-@njit
+@njit(inline="always")
 def sys_output(yp, ys, y, o):
     """``model_mismatch`` and the numbers of its reason into ``y[o:o + N_OUT]``."""
     any_zero = False
