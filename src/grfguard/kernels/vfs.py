@@ -1109,6 +1109,28 @@ def resolve_pending(y, state, cf, ci, ws, iws):
 _TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT)
 
 
+def _filter_design(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(b, a, zi)`` stacked for the rate, fusion and accelerometer low-passes of a
+    ``VFSConfig`` (the rate low-pass damped and/or with a lead when set)."""
+    from grfguard._iir import butter_lowpass, damped_lowpass, lfilter_zi  # no scipy.signal
+
+    bs, as_, zs = [], [], []
+    for i, cut in enumerate((cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff)):
+        if i == 0 and (cfg.filter_damping is not None or cfg.filter_lead):
+            b, a = damped_lowpass(  # the rate low-pass, damped and/or with a lead
+                cut, 1.0 / cfg.dt,
+                2**-0.5 if cfg.filter_damping is None else cfg.filter_damping,
+                cfg.filter_lead or 0.0)
+        else:
+            b, a = butter_lowpass(cfg.filter_order, cut, 1.0 / cfg.dt)
+        b, a = np.asarray(b, float), np.asarray(a, float)
+        bs.append(b)
+        as_.append(a)
+        zs.append(lfilter_zi(b, a))
+    return (np.ascontiguousarray(np.stack(bs)), np.ascontiguousarray(np.stack(as_)),
+            np.ascontiguousarray(np.stack(zs)))
+
+
 def twin_shareable(main: VFSKernel, twin: VFSKernel) -> bool:
     """Whether ``twin`` can take ``main``'s front of the step (:func:`vfs_step_shared`):
     the same model, sites, attitude filter and inputs, the default (non-paper) odometry,
@@ -1193,24 +1215,7 @@ class VFSKernel:
         self.iprm = ip
         self.body_inertia = np.ascontiguousarray(kin.body_inertia, dtype=float)
         self.corner_radius = np.ascontiguousarray(kin.corner_radius, dtype=float)
-        bs, as_, zs = [], [], []
-        from grfguard._iir import butter_lowpass, damped_lowpass, lfilter_zi  # no scipy.signal
-
-        for i, cut in enumerate((cfg.filter_cutoff, cfg.fusion_cutoff, cfg.acc_cutoff)):
-            if i == 0 and (cfg.filter_damping is not None or cfg.filter_lead):
-                b, a = damped_lowpass(  # the rate low-pass, damped and/or with a lead
-                    cut, 1.0 / cfg.dt,
-                    2**-0.5 if cfg.filter_damping is None else cfg.filter_damping,
-                    cfg.filter_lead or 0.0)
-            else:
-                b, a = butter_lowpass(cfg.filter_order, cut, 1.0 / cfg.dt)
-            b, a = np.asarray(b, float), np.asarray(a, float)
-            bs.append(b)
-            as_.append(a)
-            zs.append(lfilter_zi(b, a))
-        self.filt_b = np.ascontiguousarray(np.stack(bs))
-        self.filt_a = np.ascontiguousarray(np.stack(as_))
-        self.filt_zi = np.ascontiguousarray(np.stack(zs))
+        self.filt_b, self.filt_a, self.filt_zi = _filter_design(cfg)
         self.order = cfg.filter_order
         nb = tm.nbody
         self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE + N_PEND)
