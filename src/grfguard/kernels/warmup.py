@@ -1,9 +1,10 @@
 """Compile (or load from the on-disk cache) every kernel before the first real sample.
 
-The first call in a fresh environment compiles for tens of seconds (numba, one core);
-after that the machine code is cached next to the modules and a new process loads it in
-one to three seconds. :func:`warm_up` does it up front, e.g. before a live monitor
-starts, so no sample pays for it.
+The first call in a fresh environment compiles every kernel: about four minutes of CPU
+(numba, one core; BENCHMARKS "Compiled kernels"). After that the machine code is cached
+next to the modules and a new process loads it in one to three seconds.
+:func:`warm_up` does it up front, e.g. before a live monitor starts, so no sample pays
+for it.
 """
 
 from __future__ import annotations
