@@ -122,7 +122,8 @@ def test_cli_simulate_reality_calibrate_model_and_run(gap_walk, tmp_path):
 
 def test_cli_calibrate_model_records_the_twin_filter_and_run_uses_it(tmp_path, monkeypatch):
     """With a vibrating accelerometer `calibrate --model` chooses the accelerometer-free
-    sensor's rate low-pass (two settings here, to keep the test short), writes it into
+    sensor's rate low-pass (two settings here, to keep the test short) at the
+    command's false-alarm rate, writes it into
     the thresholds file, and `run` with that file monitors with it: the calibration walk
     itself is not flagged."""
     from typer.testing import CliRunner
@@ -135,12 +136,21 @@ def test_cli_calibrate_model_records_the_twin_filter_and_run_uses_it(tmp_path, m
     from grfguard.sim.reality import load_reality
 
     monkeypatch.setattr(tf, "TWIN_FILTER_GRID", ((10.0, None), (8.0, 0.5)))
+    rates, choose = [], tf.choose_twin_filter
+
+    def spy(*args, **kwargs):  # the filter is chosen at the CLI's false-alarm rate
+        rates.append(kwargs.get("false_alarm_rate_per_hour"))
+        return choose(*args, **kwargs)
+
+    monkeypatch.setattr(tf, "choose_twin_filter", spy)
     gap = RealityGap(acc_vibration=load_reality("all").acc_vibration, seed=7)
     log = tmp_path / "vib.parquet"
     write_log(simulate(gait=GaitConfig(duration=16.0), seed=1, reality=gap), log)
     th = tmp_path / "th.toml"
-    res = CliRunner().invoke(app, ["calibrate", str(log), "-o", str(th), "--model"])
+    res = CliRunner().invoke(app, ["calibrate", str(log), "-o", str(th), "--model",
+                                   "--false-alarm-rate", "0.05"])
     assert res.exit_code == 0, res.output
+    assert rates == [0.05]
     assert "(chosen)" in res.output  # the settings tried, on the console
     corr = ModelCorrections.from_toml(th)
     assert not corr.use_accelerometer

@@ -572,7 +572,8 @@ def calibrate(
     if model:  # model corrections first, thresholds on the corrected data (issue 10)
         from grfguard.cli_calib import fit_model_corrections
 
-        frames, corr_toml, config = fit_model_corrections(frames, mass, console, config)
+        frames, corr_toml, config = fit_model_corrections(frames, mass, console, config,
+                                                          false_alarm_rate)
     th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
     atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")

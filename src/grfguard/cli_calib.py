@@ -9,7 +9,8 @@ __all__ = ["fit_model_corrections", "corrected_log_and_config"]
 
 
 def fit_model_corrections(
-    frames: list[Any], mass_kg: float | None, console: Any = None, config: Any = None
+    frames: list[Any], mass_kg: float | None, console: Any = None, config: Any = None,
+    false_alarm_rate_per_hour: float = 0.1,
 ) -> tuple[list[Any], str, Any]:
     """Fit :class:`~grfguard.calib.ModelCorrections` on fault-free logs.
 
@@ -18,14 +19,16 @@ def fit_model_corrections(
         mass_kg: Weighed mass [kg] or None.
         console: Where the summary goes (None: nowhere).
         config: Monitor config (``MonitorConfig``, a TOML path or None).
+        false_alarm_rate_per_hour: The rate the thresholds will be calibrated at
+            (``grfguard calibrate --false-alarm-rate``): the filter is chosen at it too.
 
     Returns:
         The corrected logs (thresholds are calibrated on them), the
         ``[model_corrections]`` TOML text to append to the thresholds file, and the
         monitor config to calibrate the thresholds with (the accelerometer left out of
         the virtual sensor when it vibrates, with the rate low-pass chosen on these logs
-        by :func:`grfguard.calib.twin_filter.choose_twin_filter` at the default
-        false-alarm rate).
+        by :func:`grfguard.calib.twin_filter.choose_twin_filter` at
+        ``false_alarm_rate_per_hour``).
     """
     from grfguard.calib import apply_corrections, corrected_config, estimate_corrections
     from grfguard.calib.twin_filter import choose_twin_filter
@@ -35,7 +38,8 @@ def fit_model_corrections(
     if isinstance(config, (str, Path)):
         config = MonitorConfig.from_toml(config)
     fixed = [apply_corrections(f, corr) for f in frames]
-    corr, rows = choose_twin_filter(fixed, corr, config)  # accelerometer left out only
+    corr, rows = choose_twin_filter(fixed, corr, config,  # accelerometer left out only
+                                    false_alarm_rate_per_hour=false_alarm_rate_per_hour)
     if rows:
         fixed = [apply_corrections(f, corr) for f in frames]  # records the chosen filter
     if console is not None:
