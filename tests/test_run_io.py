@@ -10,6 +10,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from arrow_compare import same_bits
 from grfguard.cli import run_log
 from grfguard.detect.monitor import Monitor
 from grfguard.faults import inject_faults, parse_fault_spec
@@ -66,7 +67,6 @@ def test_codes_to_str_equals_python_strings() -> None:
 def test_one_code_columns_equal_python_strings(code) -> None:
     """A column of one code (built from its buffers, not by ``take``), for every name,
     also the empty one, and a column mixing codes: the Arrow array of Python strings."""
-    import pyarrow as pa
 
     names = (*KIND_NAMES, "", "drölf")
     for codes in (np.full(1000, code), np.full(3, len(names) - 2), np.full(3, len(names) - 1),
@@ -148,19 +148,6 @@ def test_run_output_equals_the_python_monitor(bad_walk, tmp_path) -> None:
     assert "frozen" in kinds and len(kinds - {"none"}) >= 2, kinds  # several names
 
 
-def _same_bits(a: pa.ChunkedArray, b: pa.ChunkedArray) -> bool:
-    """Same type, same nulls, same values (floats compared bit for bit)."""
-    x, y = a.combine_chunks(), b.combine_chunks()
-    if x.type != y.type or x.null_count != y.null_count:
-        return False
-    if x.null_count and not x.is_null().equals(y.is_null()):
-        return False
-    if pa.types.is_floating(x.type):
-        xv, yv = x.fill_null(0.0).to_numpy(), y.fill_null(0.0).to_numpy()
-        return bool(np.array_equal(xv.view(np.int64), yv.view(np.int64)))
-    return x.equals(y)
-
-
 @pytest.mark.parametrize("rows", [1 << 17, 777])
 def test_block_writer_equals_the_frame_path(bad_walk, tmp_path, rows) -> None:
     """``write_run`` (the compiled monitor's arrays straight to Parquet, block by block)
@@ -180,7 +167,7 @@ def test_block_writer_equals_the_frame_path(bad_walk, tmp_path, rows) -> None:
         a, b = pq.read_table(new), pq.read_table(old)
         assert a.schema.equals(b.schema, check_metadata=True)
         assert a.column_names == b.column_names and a.num_rows == b.num_rows == len(src)
-        bad = [c for c in b.column_names if not _same_bits(a[c], b[c])]
+        bad = [c for c in b.column_names if not same_bits(a[c], b[c])]
         assert not bad, bad
         if rows < len(src):
             assert pq.ParquetFile(new).metadata.num_row_groups == -(-len(src) // rows)

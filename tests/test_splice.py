@@ -12,6 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from arrow_compare import same_bits
 from grfguard.detect.monitor import Monitor
 from grfguard.io import _thrift
 from grfguard.io.logio import read_log, write_log
@@ -31,18 +32,6 @@ def walk(tmp_path_factory) -> tuple:
     path = tmp_path_factory.mktemp("splice") / "walk.parquet"
     write_log(log, path)
     return path, log
-
-
-def _same_bits(a: pa.ChunkedArray, b: pa.ChunkedArray) -> bool:
-    x, y = a.combine_chunks(), b.combine_chunks()
-    if x.type != y.type or x.null_count != y.null_count:
-        return False
-    if x.null_count and not x.is_null().equals(y.is_null()):
-        return False
-    if pa.types.is_floating(x.type):
-        xv, yv = x.fill_null(0.0).to_numpy(), y.fill_null(0.0).to_numpy()
-        return bool(np.array_equal(xv.view(np.int64), yv.view(np.int64)))
-    return x.equals(y)
 
 
 def _spliced_equals_frame_path(src, tmp_path, monkeypatch, rows: int = 1 << 17) -> tuple:
@@ -65,7 +54,7 @@ def _spliced_equals_frame_path(src, tmp_path, monkeypatch, rows: int = 1 << 17) 
     a, b = pq.read_table(new), pq.read_table(old)
     assert a.schema.equals(b.schema, check_metadata=True)
     assert a.column_names == b.column_names and a.num_rows == b.num_rows == len(log)
-    bad = [c for c in b.column_names if not _same_bits(a[c], b[c])]
+    bad = [c for c in b.column_names if not same_bits(a[c], b[c])]
     assert not bad, bad
     return copied, new
 
@@ -213,7 +202,7 @@ def test_run_log_copies_the_truth_unread(walk, tmp_path, monkeypatch) -> None:
     write_log(Monitor.for_log(full).run(full), ref)
     a, b = pq.read_table(tmp_path / "a.parquet"), pq.read_table(ref)
     assert a.schema.equals(b.schema, check_metadata=True)
-    assert not [c for c in b.column_names if not _same_bits(a[c], b[c])]
+    assert not [c for c in b.column_names if not same_bits(a[c], b[c])]
 
 
 def test_copy_only_columns_refuses_other_files(walk, tmp_path) -> None:

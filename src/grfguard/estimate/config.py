@@ -28,6 +28,10 @@ def _num(name: str, value: Any, lo: float, hi: float, unit: str) -> None:
     check_number("vfs", name, value, lo, hi, unit, "fix it in the [vfs] table of the config")
 
 
+#: Valid ranges of the rate low-pass's second-order options (damping ratio; lead [s]).
+_SECOND_ORDER_RANGE = {"filter_damping": (0.2, 2.0), "filter_lead": (0.0, 0.05)}
+
+
 @dataclass(frozen=True)
 class VFSConfig:
     """Settings of :class:`grfguard.estimate.vfs.VirtualForceSensor`.
@@ -161,21 +165,17 @@ class VFSConfig:
             raise ConfigError(
                 f"vfs.filter_order = {self.filter_order!r} must be an integer in [1, 8]"
             )
-        if self.filter_damping is not None:
-            _num("filter_damping", self.filter_damping, 0.2, 2.0, "")
+        for name, unit, other in (("filter_damping", "", " (Butterworth)"),
+                                  ("filter_lead", "s", "")):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            _num(name, value, *(_SECOND_ORDER_RANGE[name]), unit)
             if self.filter_order != 2:
                 raise ConfigError(
-                    f"vfs.filter_damping = {self.filter_damping!r} shapes a second-order "
-                    f"low-pass but vfs.filter_order = {self.filter_order}; set filter_order "
-                    "= 2 or leave filter_damping out (Butterworth)"
-                )
-        if self.filter_lead is not None:
-            _num("filter_lead", self.filter_lead, 0.0, 0.05, "s")
-            if self.filter_order != 2:
-                raise ConfigError(
-                    f"vfs.filter_lead = {self.filter_lead!r} shapes a second-order "
-                    f"low-pass but vfs.filter_order = {self.filter_order}; set filter_order "
-                    "= 2 or leave filter_lead out"
+                    f"vfs.{name} = {value!r} shapes a second-order low-pass but "
+                    f"vfs.filter_order = {self.filter_order}; set filter_order = 2 or "
+                    f"leave {name} out{other}"
                 )
         _num("fusion_cutoff", self.fusion_cutoff, 0.01, 0.45 / self.dt, "Hz")
         _num("acc_cutoff", self.acc_cutoff, 0.1, 0.45 / self.dt, "Hz")
