@@ -31,7 +31,9 @@ sensor's error above 10 Hz with its attitude inputs smoothed (oracles) or ``anch
 
 Usage: ``python benchmarks/bench_selfcal_odom.py [--seed N] [--write]``; ``--write``
 replaces the ``## Model self-calibration: smoothing the leg odometry`` section of
-BENCHMARKS.md (seed 1 only).
+BENCHMARKS.md (seed 1 only). ``--other-walks 10``: instead, whether the per-channel
+low-passes ring on other gaits (healthy-sensor alarm episodes on 10 min of other walks of
+the robot, as ``bench_selfcal.py`` counts them; printed only).
 """
 
 from __future__ import annotations
@@ -271,10 +273,61 @@ def high_frequency_zmp(log, cfg0) -> list[tuple[str, float, float, float, float]
     return rows
 
 
+#: Gaits (step length m, period s) of the other walks, as ``bench_selfcal.py``.
+GAITS = ((0.12, 1.0), (0.15, 0.8), (0.08, 1.2), (0.18, 1.0), (0.1, 0.9))
+#: (label, kinematic channels' VFSConfig changes, odometry channel (cut-off, damping) or
+#: None for one low-pass on every channel)
+RING_CASES = (
+    ("8 Hz / 0.45, every channel (chosen)", CHOSEN, None),
+    ("7 Hz / 0.35, every channel", {"filter_cutoff": 7.0, "filter_damping": 0.35}, None),
+    ("kinematic 8 Hz / 0.45, odometry 8 Hz / 0.45 (per-channel path)", CHOSEN, (8.0, 0.45)),
+    ("kinematic 10 Hz BW, odometry 7 Hz / 0.35",
+     {"filter_cutoff": 10.0, "filter_damping": None}, (7.0, 0.35)),
+    ("kinematic 10 Hz BW, odometry 8 Hz / 0.4",
+     {"filter_cutoff": 10.0, "filter_damping": None}, (8.0, 0.4)),
+)
+
+
+def other_walks(log, cfg0, corr, minutes: int) -> list[tuple[str, float, list[int]]]:
+    """Per-corner threshold on the calibration data and healthy-sensor alarm episodes on
+    ``minutes`` other 60 s walks of the robot (seeds 11 on, :data:`GAITS`) for
+    :data:`RING_CASES` (the per-channel ones through the gravity-only accelerometer)."""
+    from grfguard.detect import Monitor
+
+    walks = []
+    for k in range(minutes):
+        sl, sp = GAITS[k % len(GAITS)]
+        w = simulate(gait=GaitConfig(duration=60.0, step_length=sl, step_period=sp),
+                     seed=11 + k, reality=load_reality("all"))
+        walks.append(apply_corrections(w, corr))
+    rows = []
+    for lab, kin, odo in RING_CASES:
+        change, sub, prep = dict(kin), None, (lambda lg: lg)
+        if odo is not None:
+            ba = iir.damped_lowpass(odo[0], FS, odo[1])
+            change.update(use_accelerometer=True, fusion_cutoff=SENT_FUSE, acc_cutoff=SENT_ACC)
+            sub, prep = {SENT_FUSE: ba, SENT_ACC: ba}, gravity_only
+        cfg = cfg0.replace(vfs=cfg0.vfs.replace(**change))
+        with designs(sub) if sub else contextlib.nullcontext():
+            th = calibrate_thresholds([prep(log)], config=cfg)
+            eps = []
+            for w in walks:
+                wc = prep(w)
+                out = Monitor.for_log(wc, config=cfg.with_thresholds(th)).run(wc)
+                fl = out[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
+                eps.append(int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0])))
+        rows.append((lab, th.corner_sigma * th.corner_h, eps))
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--other-walks", type=int, default=0, metavar="MINUTES",
+                    help="only the ringing check: alarm episodes on MINUTES other walks "
+                         "for the per-channel low-passes (printed, not written)")
     args = ap.parse_args()
     t0, c0, load0 = time.time(), time.process_time(), os.getloadavg()[0]
     exact = simulate(gait=GaitConfig(duration=60.0), seed=args.seed)
@@ -286,6 +339,13 @@ def main() -> None:
     corr = estimate_corrections(cal, measured_mass_kg=m_true)
     log, cfg0 = apply_corrections(cal, corr), corrected_config(MonitorConfig(), corr)
     print(f"exact model corner threshold {c_x:.4f} ({time.time() - t0:.0f} s)", flush=True)
+    if args.other_walks:
+        for lab, c, eps in other_walks(log, cfg0, corr, args.other_walks):
+            print(f"{lab}: corner {c:.4f} ({c / c_x:.3f}x); alarm episodes {sum(eps)} "
+                  f"({', '.join(map(str, eps))})")
+        print(f"Runtime {time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU "
+              f"(load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end)")
+        return
     rows = []
     for group, lab, lg, change, sub in cases(log):
         c, h, tot = threshold(lg, cfg0, change, sub)
