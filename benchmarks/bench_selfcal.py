@@ -112,7 +112,15 @@ READING = (
     'of other walks with 8 Hz 0.42: 1, 8 Hz 0.4: 4, 7 Hz 0.4: 5, 7 Hz 0.35: 7, 7 Hz 0.3: '
     '20; with damping 0.45 or more: 0 (also 8.5 Hz 0.45: 0.610, and 7.5 Hz 0.45: 0.619, b'
     'oth 0). So the grid stops at 0.45 (`TWIN_FILTER_GRID`), and the 2x bound is missed b'
-    'y 1 % rather than met without margin against false alarms. Other seeds (`python benc'
+    'y 1 % rather than met without margin against false alarms. '
+    'A phase lead on that low-pass does not close the gap either (section "Model self-cal'
+    'ibration: phase lead on the rate low-pass": as a second-order design much worse, the'
+    " lead's noise gain taken back by more poles 1.1-1.2 % better at most, with more reso"
+    'nance), nor does smoothing the leg odometry otherwise (section "Model self-calibrati'
+    'on: smoothing the leg odometry": kinematic Kalman filters, fourth order, per-channel'
+    ' low-passes, a gyro low-pass; the lag is a quarter of the single-support ZMP error; '
+    "about 40 % of the odometry's noise above 10 Hz is the gyro-integrated attitude's). "
+    'Other seeds (`python benc'
     'hmarks/bench_selfcal.py --minutes 10 --seed N`, same day): seed 2 chooses 8 Hz 0.45,'
     ' 0.620 / 0.313 = 1.98x (met); on seed 3 every damped setting rings on the calibratio'
     'n data itself (`h` 35-52), the Butterworth is kept, 0.732 / 0.488 = 1.50x (met: the '
