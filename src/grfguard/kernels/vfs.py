@@ -195,18 +195,20 @@ def _sum_seq(a, n):
 
 
 @njit_nort
-def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi,
-          tree, sites, ws, iws):
+def _step(x, y, state, cf, ci, ws, iws):
     """Process one input row ``x`` (:data:`IN_COLUMNS`) into ``y`` (:data:`OUT_COLUMNS`).
 
-    ``state`` is updated in place (only for a valid sample). ``prm``, ``iprm``,
-    ``body_inertia``, ``corner_radius``, ``filt_*``, ``tree`` and ``sites`` are the
-    constants built by :class:`VFSKernel`; ``ws``/``iws`` are float/int scratch.
+    ``state`` is updated in place (only for a valid sample). ``cf``/``ci`` are the
+    packed constants built by :class:`VFSKernel` (unpacked here: views cost a few
+    additions, while numba passes every array argument of a compiled call as 7 machine
+    words, about 240 for the 34 unpacked arrays); ``ws``/``iws`` are float/int scratch.
     Returns True for a valid sample.
 
     Stages: validity, attitude filter, kinematics, stance, leg odometry, raw rates,
     filters, ZMP (Newton-Euler), corner contact, compliance prior + QP, outputs.
     """
+    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
+        cf, ci)
     body_mass = tree[8]
     nb = tree[0].shape[0]
     nq = tree[13].shape[0]
@@ -247,9 +249,8 @@ def _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a, f
         F0, F1, F2, zmp0, zmp1 = _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw,
                                                main, v3a, v3b, v3c, v3d, aw, ax, ay, az,
                                                order, g, xo, com0, com1, com2, ground)
-    _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M,
-                   qp_rhs, qp_dots, iws, tail, pwt0, pwt1, pwt2, ground, com0, com1, com2, F0,
-                   F1, F2, zmp0, zmp1, st0, st1)
+    _split_outputs(y, state, cf, ws, iws, nq, nb, pwt0, pwt1, pwt2, ground, com0, com1,
+                   com2, F0, F1, F2, zmp0, zmp1, st0, st1)
     return True
 
 
@@ -270,10 +271,14 @@ def _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw, main, v3a, v3b, v
 
 
 @njit_nort
-def _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M,
-                   qp_rhs, qp_dots, iws, tail, pwt0, pwt1, pwt2, ground, com0, com1, com2, F0,
-                   F1, F2, zmp0, zmp1, st0, st1):
-    """Corner contact, force split (compliance QP or the paper's) and the output row."""
+def _split_outputs(y, state, cf, ws, iws, nq, nb, pwt0, pwt1, pwt2, ground, com0, com1, com2,
+                   F0, F1, F2, zmp0, zmp1, st0, st1):
+    """Corner contact, force split (compliance QP or the paper's) and the output row
+    (the scratch views taken here from ``ws``/``iws``: fewer call arguments)."""
+    prm = view1d(cf, 0, N_PRM)
+    (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
+     v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+     tail) = _scratch_views(ws, nq, nb)
     ctc = view1d(iws, 0, 8)
     if prm[P_SPLIT_PAPER] != 0.0:  # vfs_paper: the paper's split
         paper_split(prm, pk, sxp, sxm, pwt0, pwt1, pwt2, com0, com1, com2, F0, F1, F2, st0,
@@ -281,9 +286,7 @@ def _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x
                     qp_M, qp_rhs, qp_dots, tail)
     else:
         _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1)
-        _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs,
-                     qp_dots, view1d(iws, 8, 8), view1d(iws, 16, 8), view1d(iws, 24, 8),
-                     tail, F2, zmp0, zmp1, view1d(iws, _IW_WARM, 2))
+        _force_split(prm, ws, iws, nq, nb, F2, zmp0, zmp1)
     _outputs(y, state, forces, pk, ctc, com0, com1, com2, zmp0, zmp1)
 
 
@@ -778,13 +781,20 @@ def _corner_contact(prm, pk, tmp8, ctc, pwt0, pwt1, pwt2, ground, st0, st1):
 
 
 @njit_nort
-def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
-                 qp_free, qp_isfree, cidx, work, F2, zmp0, zmp1, warm):
+def _force_split(prm, ws, iws, nq, nb, F2, zmp0, zmp1):
     """Compliance prior + QP: the corner forces ``forces`` [N] (0 off contact, NaN if an
-    input is not finite) summing to ``F2`` with their CoP at the ZMP. ``warm`` (2 ints,
-    scratch): the contact pattern and the positive corners of the last solve, the QP's
-    starting guess (:func:`grfguard.kernels.nnls.prior_qp_warm`; the bits do not depend
-    on it)."""
+    input is not finite) summing to ``F2`` with their CoP at the ZMP (the scratch views
+    of ``ws``/``iws`` as :func:`_split_outputs`'). The int scratch's warm slots (2 ints):
+    the contact pattern and the positive corners of the last solve, the QP's starting
+    guess (:func:`grfguard.kernels.nnls.prior_qp_warm`; the bits do not depend on it)."""
+    (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
+     v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
+     work) = _scratch_views(ws, nq, nb)
+    ctc = view1d(iws, 0, 8)
+    qp_free = view1d(iws, 8, 8)
+    qp_isfree = view1d(iws, 16, 8)
+    cidx = view1d(iws, 24, 8)
+    warm = view1d(iws, _IW_WARM, 2)
     cnt = 0
     for k in range(8):
         cnt += ctc[k]
@@ -979,10 +989,7 @@ def vfs_step(x, y, state, cf, ci, ws, iws):
     Python objects; the same function runs behind :meth:`VFSKernel.step` (streaming) and
     :func:`vfs_run` (batch), so both agree bit for bit.
     """
-    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
-        cf, ci)
-    return _step(x, y, state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                 filt_zi, tree, sites, ws, iws)
+    return _step(x, y, state, cf, ci, ws, iws)
 
 
 @njit_nort
@@ -990,12 +997,9 @@ def vfs_run(X, Y, state, cf, ci, ws, iws):
     """:func:`vfs_step` over every row of ``X`` (T, 24) into ``Y`` (T, 22) in one compiled
     loop (the batch path: the same step as streaming); returns the number of valid
     samples. Arguments after ``X, Y`` as in :func:`vfs_step`."""
-    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
-        cf, ci)
     n = 0
     for t in range(X.shape[0]):
-        if _step(X[t], Y[t], state, prm, iprm, body_inertia, corner_radius, filt_b, filt_a,
-                 filt_zi, tree, sites, ws, iws):
+        if _step(X[t], Y[t], state, cf, ci, ws, iws):
             n += 1
     return n
 
@@ -1093,8 +1097,6 @@ def resolve_pending(y, state, cf, ci, ws, iws):
     if pend[0] == 0.0:
         return
     pend[0] = 0.0
-    prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
-        cf, ci)
     (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a, v3b,
      v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
      tail) = _scratch_views(ws, ci[2], ci[0])
@@ -1102,10 +1104,9 @@ def resolve_pending(y, state, cf, ci, ws, iws):
         pk[k, 0] = pend[1 + 3 * k]
         pk[k, 1] = pend[2 + 3 * k]
         pk[k, 2] = pend[3 + 3 * k]
-    _split_outputs(y, state, prm, pk, sxp, sxm, tmp8, prior8, rel8, forces, qp_x, qp_z,
-                   qp_M, qp_rhs, qp_dots, iws, tail, pend[25], pend[26], pend[27], pend[28],
-                   pend[29], pend[30], pend[31], pend[34], pend[35], pend[36], pend[37],
-                   pend[38], pend[32] != 0.0, pend[33] != 0.0)
+    _split_outputs(y, state, cf, ws, iws, ci[2], ci[0], pend[25], pend[26], pend[27],
+                   pend[28], pend[29], pend[30], pend[31], pend[34], pend[35], pend[36],
+                   pend[37], pend[38], pend[32] != 0.0, pend[33] != 0.0)
 
 
 #: The settings a twin may change without changing the front of the step.

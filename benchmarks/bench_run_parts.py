@@ -1,0 +1,90 @@
+"""Where ``Monitor.run``'s time goes outside the compiled loop (issue 11, must-show 2).
+
+SURALP, the paper scenario on the 60 s walk (seed 0), default monitor (common-mode layer
+on, VFS inside). Each round runs ``Monitor.run`` once and then a copy of
+``kernels.monitor.run_frame`` with a timer between its parts (the kernel set-up, the
+input columns, the compiled loop into fresh output memory, the output columns, the frame
+assembly, ``attrs``), so both see the same load; prints the minimum and median of each
+part in µs/sample of process CPU time. Pin it to one core::
+
+    taskset -c 0 .venv/bin/python benchmarks/bench_run_parts.py --rounds 9
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=9)
+    a = ap.parse_args()
+    from grfguard.detect import Monitor
+    from grfguard.faults import inject_faults
+    from grfguard.io.codes import codes_to_str
+    from grfguard.kernels import monitor as M
+    from grfguard.model.robot import SURALP
+    from grfguard.sim import GaitConfig, NoiseConfig, simulate
+
+    walk = simulate(SURALP, GaitConfig(duration=60.0), NoiseConfig(), seed=0)
+    raw = inject_faults(walk, ["r1=frozen:0@5", "r2=offset:100@5", "r3=drift:15@5",
+                               "r4=offset:-100@5"], seed=0)
+    mon = Monitor.for_log(raw)
+    mon.run(raw)  # compile or load, warm
+    n = len(raw)
+    acc: dict[str, list[float]] = {}
+
+    def tick(name: str, t0: float) -> float:
+        t = time.process_time()
+        acc.setdefault(name, []).append((t - t0) / n * 1e6)
+        return t
+
+    def parts() -> None:
+        t = time.process_time()
+        k = mon._batch_kernel(raw)
+        log = raw.copy(deep=False)
+        log.attrs = {}
+        t = tick("kernel set-up (reset, checks)", t)
+        src = [(M._column(log, c) if c in log.columns else None) for c in k.in_cols]
+        t = tick("input columns", t)
+        Y = np.empty((n, len(k.out_cols)), order="F")
+        EX = np.empty((n, M.N_EX))
+        M.run_rows(k, src, 0, n, M.chunk_buffers(k, min(4096, n)), Y, EX)
+        t = tick("compiled loop (fresh output memory)", t)
+        new = {}
+        for name, typ, j in M.output_rows(k):
+            if typ == "float":
+                new[name] = Y[:, j]
+            elif typ == "flag":
+                new[name] = Y[:, j] != 0.0
+            elif typ == "kind":
+                new[name] = codes_to_str(Y[:, j].astype(np.int64), M.KIND_NAMES)
+            elif typ == "mismatch_reason":
+                new[name] = M._mismatch_reasons(Y[:, j:], k.vib_config)
+            elif typ == "state":
+                new[name] = codes_to_str(Y[:, j].astype(np.int64), M.SYSTEM_STATES)
+            else:
+                new[name] = M._reasons(mon, log, Y[:, j].astype(np.int64), src[0], EX)
+        t = tick("output columns (kinds, flags, texts)", t)
+        out = M._with_columns(log, new)
+        t = tick("frame assembly", t)
+        out.attrs = {**raw.attrs, "monitor": mon.describe()}
+        tick("attrs", t)
+
+    for _ in range(a.rounds):
+        t0 = time.process_time()
+        mon.run(raw)
+        tick("Monitor.run, whole", t0)
+        t0 = time.process_time()
+        parts()
+        tick("the same in parts, whole", t0)
+    print("| part | min [µs/sample] | median |\n|---|---|---|")
+    for name, v in acc.items():
+        print(f"| {name} | {min(v):.3f} | {np.median(v):.3f} |")
+
+
+if __name__ == "__main__":
+    main()
