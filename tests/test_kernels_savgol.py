@@ -10,7 +10,7 @@ import pytest
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from grfguard.estimate.wrench import _derivs
-from grfguard.kernels.savgol import _symmetry, savgol_many
+from grfguard.kernels.savgol import _edge_maps, _symmetry, savgol_many
 
 
 def _scipy(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
@@ -100,7 +100,8 @@ def test_fft_interior_equals_direct_sum(signals, win) -> None:
 @pytest.mark.parametrize("dt", [0.001, 0.01])
 def test_sliding_moments_equal_direct_sum(signals, win, dt) -> None:
     """``sliding=True``: the interior within 100 rounding units of scipy's direct sum
-    (``eps max|x| sum|w|``; measured 8-45), the polynomial edges bit for bit."""
+    (``eps max|x| sum|w|``; measured 8-45), the polynomial edges (a precomputed linear
+    map) within 100 of theirs (``eps max|x|`` times the map's largest row sum)."""
     h = win // 2
     got = savgol_many(signals, win, (0, 1, 2), dt, sliding=True)
     for o, g in enumerate(got):
@@ -109,8 +110,10 @@ def test_sliding_moments_equal_direct_sum(signals, win, dt) -> None:
             savgol_coeffs(win, 3, deriv=o, delta=dt)).sum()
         assert np.abs(g - want).max() <= 100 * unit, o
         assert not np.array_equal(g[h:-h], want[h:-h])  # the sliding path ran
-        np.testing.assert_array_equal(g[:h], want[:h])
-        np.testing.assert_array_equal(g[-h:], want[-h:])
+        E = _edge_maps(win, 3, (0, 1, 2), dt)[o]
+        e_unit = np.finfo(float).eps * np.abs(signals).max() * np.abs(E).sum(axis=-1).max()
+        assert np.abs(g[:h] - want[:h]).max() <= 100 * e_unit, o
+        assert np.abs(g[-h:] - want[-h:]).max() <= 100 * e_unit, o
         assert g.shape == signals.shape and g.flags.c_contiguous
 
 
