@@ -90,18 +90,21 @@ def _deriv(x: np.ndarray, win: int, order: int, dt: float) -> np.ndarray:
 
 
 def _derivs(x: np.ndarray, win: int, orders: tuple[int, ...], dt: float) -> list[np.ndarray]:
-    """Savitzky-Golay (cubic) derivatives of the orders ``orders`` along axis 0, the same
-    bits as ``savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")``: a
-    (T, k) array in one compiled pass for every order and column
-    (:func:`grfguard.kernels.savgol.savgol_many`). The edges are scipy's polynomial fit
-    of all ``k`` columns at once, whose rounding depends on ``k``: keep the column groups
-    (stacking arrays would change the edge samples' last bits)."""
+    """Savitzky-Golay (cubic) derivatives of the orders ``orders`` along axis 0, as
+    ``savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")``: a (T, k)
+    array in one compiled pass for every order and column
+    (:func:`grfguard.kernels.savgol.savgol_many`), the interior from sliding polynomial
+    moments for windows of 33 samples and more (within some 10-50 rounding units of
+    scipy's direct sum; shorter windows and non-finite inputs: scipy's bits). The edges
+    are scipy's polynomial fit of all ``k`` columns at once, whose rounding depends on
+    ``k``: keep the column groups (stacking arrays would change the edge samples' last
+    bits)."""
     if x.ndim != 2:
         return [savgol_filter(x, win, 3, deriv=o, delta=dt, axis=0, mode="interp")
                 for o in orders]
     from grfguard.kernels.savgol import savgol_many
 
-    return savgol_many(x, win, orders, dt)
+    return savgol_many(x, win, orders, dt, sliding=True)
 
 
 def _smooth_long(x: np.ndarray, win: int, dt: float) -> np.ndarray:
