@@ -99,7 +99,8 @@ _P_DT, _P_KATT, _P_CH, _P_G, _P_MASS, _P_KC, _P_SW = 0, 1, 2, 3, 4, 5, 6
 _P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10, 11, 12
 _P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
 _P_ANCHOR_HOLD = 40  # VFSConfig.anchor_hold (after the vfs_paper block)
-N_PRM = 41  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
+_P_TWIST = 41  # VFSConfig.contact_twist
+N_PRM = 42  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
 # int parameters (iprm)
 _IP_TRUNK, _IP_ROOT, _IP_JOINTS = 0, 1, 2
 _IP_IMU = _IP_JOINTS + _NJ
@@ -830,6 +831,37 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
                 qp_x[c] = qp_x[c] * f
         for c in range(m):
             forces[cidx[c]] = qp_x[c]
+        if prm[_P_TWIST] != 0.0:
+            _contact_twist(forces, ctc, prm[_P_TWIST])
+
+
+@njit_nort
+def _contact_twist(forces, ctc, kappa):
+    """Each sole whose four corners are in contact and loaded gets the twist of a
+    nonlinear contact (``VFSConfig.contact_twist``): ``f1 - f2 - f3 + f4 = kappa P R / S``
+    with ``S`` its load, ``P = f1 + f2 - f3 - f4`` and ``R = f1 - f2 + f3 - f4`` (corners
+    front-left, front-right, rear-left, rear-right). The twist is orthogonal to the load
+    and the centre of pressure of a rectangle, so both stay as the QP gave them (there
+    the QP's own twist is the flat prior's: zero); scaled down so no corner goes below 0."""
+    for o in (0, 4):
+        ok = True
+        for k in range(o, o + 4):
+            if not (ctc[k] and forces[k] > 0.0):
+                ok = False
+        if not ok:
+            continue
+        f1, f2, f3, f4 = forces[o], forces[o + 1], forces[o + 2], forces[o + 3]
+        tw = kappa * (f1 + f2 - f3 - f4) * (f1 - f2 + f3 - f4) / (f1 + f2 + f3 + f4)
+        q = 0.25 * tw
+        # corners 1, 4 gain q, corners 2, 3 lose it: keep every force >= 0
+        if q > 0.0:
+            q = min(q, f2, f3)
+        else:
+            q = max(q, -f1, -f4)
+        forces[o] = f1 + q
+        forces[o + 1] = f2 - q
+        forces[o + 2] = f3 - q
+        forces[o + 3] = f4 + q
 
 
 @njit_nort(inline="always")
@@ -1106,7 +1138,21 @@ def resolve_pending(y, state, cf, ci, ws, iws):
 
 
 #: The settings a twin may change without changing the front of the step.
-_TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT)
+_TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT, _P_TWIST)
+
+
+def _check_twist_layout(points_F: np.ndarray) -> None:
+    """``VFSConfig.contact_twist`` needs the sole corners front-left, front-right,
+    rear-left, rear-right (the twist pattern of :func:`_contact_twist`)."""
+    from grfguard.errors import ConfigError
+
+    p = np.asarray(points_F, float)
+    if p.shape != (4, 2) or not (np.array_equal(np.sign(p[:, 0]), [1, 1, -1, -1])
+                                 and np.array_equal(np.sign(p[:, 1]), [1, -1, 1, -1])):
+        raise ConfigError(
+            "vfs.contact_twist needs four sensors per sole ordered front-left, front-right, "
+            f"rear-left, rear-right; this robot's sole sensors are at {p.tolist()} [m]; "
+            "set vfs.contact_twist = 0")
 
 
 def _filter_design(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1200,6 +1246,9 @@ class VFSKernel:
         prm[_P_QIT : _P_QIT + 4] = kin._q_IT
         prm[18:_P_ANCHOR_HOLD] = extra_params(cfg, vfs.points_F)
         prm[_P_ANCHOR_HOLD] = float(cfg.anchor_hold)
+        prm[_P_TWIST] = cfg.contact_twist
+        if cfg.contact_twist != 0.0:
+            _check_twist_layout(vfs.points_F)
         self.prm = prm
         #: Input row layout (:data:`IN_COLUMNS`; the paper's CoM filter also reads the
         #: force sensors and the planned ZMP: :data:`PAPER_IN_COLUMNS`).
