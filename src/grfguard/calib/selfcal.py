@@ -34,9 +34,9 @@ Uses only the redundancy of fault-free walking (no simulation truth):
   sole's load, ``P`` front minus rear, ``R`` left minus right corners), large when the
   centre of pressure sits off the sole's centre in both axes (a trunk CoM a few cm off:
   20-50 N), which the virtual sensor's planar split misses. Least squares over single
-  support samples with all four corrected cells loaded (:func:`_fit_contact_twist`); the
-  accelerometer-free sensor of the corrected monitor applies it
-  (``VFSConfig.contact_twist``, :func:`corrected_config`).
+  support samples with all four corrected cells loaded (:func:`_fit_contact_twist`),
+  written into the calibration file; the corrected monitor does not apply it yet
+  (``APPLY_CONTACT_TWIST``).
 * **Trunk CoM** (horizontal): the time average of the ZMP equals that of the CoM
   (the mean horizontal acceleration of a walk from rest to rest is zero), so the mean of
   ``CoP - CoM_model`` (corrected forces and attitude, trunk-yaw frame) is
@@ -134,6 +134,16 @@ ACC_QUIET_RMS = 0.2
 #: four cells of the stance sole (fraction of the weight) and least number of samples.
 TWIST_MIN_CELL_LOAD = 0.02
 TWIST_MIN_SAMPLES = 500
+#: Give the fitted contact twist to the corrected monitor's accelerometer-free sensor
+#: (:func:`corrected_config`, ``VFSConfig.contact_twist``). Measured on the all-gaps
+#: robot (BENCHMARKS.md "Model self-calibration: contact twist"): it takes the sole's
+#: twist error in flat single support from 46 to 28 N RMS and the calibrated per-corner
+#: threshold from 2.02x to 1.76x the exact model's, but the lower threshold then flags r2
+#: on 2 of the 10 other walks at heel lift, where the error left is the centre of
+#: pressure's lag, not the twist (the same alarms with the planar sensor at that
+#: threshold; none with the twist at the old one). So off until the thresholds hold
+#: that margin.
+APPLY_CONTACT_TWIST = False
 
 
 def _rpy_to_R(rpy_rad: np.ndarray) -> np.ndarray:
@@ -184,9 +194,10 @@ class ModelCorrections:
         twin_filter_damping: Damping ratio of that low-pass (``VFSConfig.filter_damping``);
             None: the Butterworth.
         contact_twist: Twist of a loaded flat sole's load, ``f1 - f2 - f3 + f4 =
-            kappa P R / S`` (:func:`_fit_contact_twist`), given to the accelerometer-free
-            virtual sensor (``VFSConfig.contact_twist``); None: not fitted (files
-            written before it), the sensor's planar split.
+            kappa P R / S`` (:func:`_fit_contact_twist`), for the accelerometer-free
+            virtual sensor (``VFSConfig.contact_twist``; applied by
+            :func:`corrected_config` only with ``APPLY_CONTACT_TWIST``); None: not
+            fitted (files written before it).
     """
 
     mass_kg: float | None = None
@@ -321,12 +332,12 @@ class ModelCorrections:
         )
 
     def _twin_filter_text(self) -> str:
-        """The accelerometer-free sensor's rate low-pass, for :meth:`summary`."""
+        """The accelerometer-free sensor's rate low-pass and contact twist, for :meth:`summary`."""
+        tw = "" if self.contact_twist is None else f"; contact twist {self.contact_twist:.2f}"
         if self.twin_filter_cutoff_hz is None and self.twin_filter_damping is None:
-            return ""
+            return tw
         z = self.twin_filter_damping
         cut = self.twin_filter_cutoff_hz
-        tw = "" if self.contact_twist is None else f", contact twist {self.contact_twist:.2f}"
         return (f"; rate low-pass {'default' if cut is None else f'{cut:g} Hz'}, "
                 + ("Butterworth" if z is None else f"damping {z:g}") + tw)
 
@@ -958,9 +969,9 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     in the calibration data (``corr.use_accelerometer`` False), the monitor's quiet twin
     (:func:`grfguard.detect.system.quiet_vfs_config`: no accelerometer, rate low-pass at
     10 Hz, or the cut-off and damping chosen on the calibration data,
-    ``corr.twin_filter_cutoff_hz`` / ``corr.twin_filter_damping``, with the fitted
-    contact twist ``corr.contact_twist``) from the start. Unchanged when ``corr`` is None
-    or the accelerometer was quiet."""
+    ``corr.twin_filter_cutoff_hz`` / ``corr.twin_filter_damping``; with the fitted
+    contact twist ``corr.contact_twist`` when ``APPLY_CONTACT_TWIST``) from the start.
+    Unchanged when ``corr`` is None or the accelerometer was quiet."""
     from grfguard.detect import MonitorConfig
     from grfguard.detect.system import quiet_vfs_config
     from grfguard.estimate.vfs import VFSConfig
@@ -972,7 +983,7 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     if vfs.com_method != "multibody":  # the paper's LIPM filter: nothing to switch
         return cfg
     quiet = quiet_vfs_config(vfs)
-    if corr.contact_twist is not None:
+    if APPLY_CONTACT_TWIST and corr.contact_twist is not None:
         quiet = quiet.replace(contact_twist=float(corr.contact_twist))
     if corr.twin_filter_cutoff_hz is not None or corr.twin_filter_damping is not None:
         cut = corr.twin_filter_cutoff_hz

@@ -821,6 +821,12 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
             relc[c, 1] = rel8[cidx[c], 1]
         _warm_qp(ctc, cidx, m, relc, tmp8, F2, prm[_P_SW], qp_x, qp_z, qp_free, qp_isfree, qp_M,
                  qp_rhs, qp_dots, warm)
+        if prm[_P_TWIST] != 0.0 and _twist_prior(prm[_P_TWIST], ctc, cidx, m, qp_x, F2,
+                                                 forces, prior8):
+            for c in range(m):
+                tmp8[c] = prior8[cidx[c]]
+            _warm_qp(ctc, cidx, m, relc, tmp8, F2, prm[_P_SW], qp_x, qp_z, qp_free, qp_isfree,
+                     qp_M, qp_rhs, qp_dots, warm)
         if m == 8:
             sx = _sum8(qp_x)
         else:
@@ -831,37 +837,39 @@ def _force_split(prm, pk, ctc, tmp8, prior8, rel8, forces, qp_x, qp_z, qp_M, qp_
                 qp_x[c] = qp_x[c] * f
         for c in range(m):
             forces[cidx[c]] = qp_x[c]
-        if prm[_P_TWIST] != 0.0:
-            _contact_twist(forces, ctc, prm[_P_TWIST])
 
 
 @njit_nort
-def _contact_twist(forces, ctc, kappa):
-    """Each sole whose four corners are in contact and loaded gets the twist of a
-    nonlinear contact (``VFSConfig.contact_twist``): ``f1 - f2 - f3 + f4 = kappa P R / S``
-    with ``S`` its load, ``P = f1 + f2 - f3 - f4`` and ``R = f1 - f2 + f3 - f4`` (corners
-    front-left, front-right, rear-left, rear-right). The twist is orthogonal to the load
-    and the centre of pressure of a rectangle, so both stay as the QP gave them (there
-    the QP's own twist is the flat prior's: zero); scaled down so no corner goes below 0."""
+def _twist_prior(kt, ctc, cidx, m, qp_x, F2, forces, prior8):
+    """Add the contact twist (``VFSConfig.contact_twist`` ``kt``) of the split ``qp_x``
+    (its ``m`` corners ``cidx``, scaled to ``F2``) to the prior ``prior8`` of each sole
+    whose four corners are in contact: ``f1 - f2 - f3 + f4 = kt P R / S`` (``S`` its load,
+    ``P`` front minus rear, ``R`` left minus right; corners front-left, front-right,
+    rear-left, rear-right). The twist is orthogonal to the load and the centre of
+    pressure of a rectangle, so the QP keeps it where no corner goes below 0 and clips
+    it where one would. ``forces`` is scratch. False when no prior changed."""
+    sx = _sum8(qp_x) if m == 8 else _sum_seq(qp_x, m)
+    if not sx > 0:
+        return False
+    f = F2 / sx
+    for k in range(8):
+        forces[k] = 0.0
+    for c in range(m):
+        forces[cidx[c]] = qp_x[c] * f
+    changed = False
     for o in (0, 4):
-        ok = True
-        for k in range(o, o + 4):
-            if not (ctc[k] and forces[k] > 0.0):
-                ok = False
-        if not ok:
+        if not (ctc[o] and ctc[o + 1] and ctc[o + 2] and ctc[o + 3]):
             continue
         f1, f2, f3, f4 = forces[o], forces[o + 1], forces[o + 2], forces[o + 3]
-        tw = kappa * (f1 + f2 - f3 - f4) * (f1 - f2 + f3 - f4) / (f1 + f2 + f3 + f4)
-        q = 0.25 * tw
-        # corners 1, 4 gain q, corners 2, 3 lose it: keep every force >= 0
-        if q > 0.0:
-            q = min(q, f2, f3)
-        else:
-            q = max(q, -f1, -f4)
-        forces[o] = f1 + q
-        forces[o + 1] = f2 - q
-        forces[o + 2] = f3 - q
-        forces[o + 3] = f4 + q
+        S = f1 + f2 + f3 + f4
+        if S > 0.0:
+            q = 0.25 * (kt * (f1 + f2 - f3 - f4) * (f1 - f2 + f3 - f4) / S)
+            prior8[o] += q
+            prior8[o + 1] -= q
+            prior8[o + 2] -= q
+            prior8[o + 3] += q
+            changed = True
+    return changed
 
 
 @njit_nort(inline="always")
