@@ -138,11 +138,11 @@ TWIST_MIN_SAMPLES = 500
 #: (:func:`corrected_config`, ``VFSConfig.contact_twist``). Measured on the all-gaps
 #: robot (BENCHMARKS.md "Model self-calibration: contact twist"): it takes the sole's
 #: twist error in flat single support from 46 to 28 N RMS and the calibrated per-corner
-#: threshold from 2.02x to 1.76x the exact model's, but the lower threshold then flags r2
-#: on 2 of the 10 other walks at heel lift, where the error left is the centre of
-#: pressure's lag, not the twist (the same alarms with the planar sensor at that
-#: threshold; none with the twist at the old one). So off until the thresholds hold
-#: that margin.
+#: threshold from 2.02x to 1.76x the exact model's, but the lower threshold then flags
+#: healthy sensors on 4 of the 10 minutes of other walks (5 episodes; seed 11: r2 at heel
+#: lift, where the error left is the centre of pressure's lag, not the twist: the same
+#: alarm with the planar sensor at that threshold, none with the twist at the old one).
+#: So off until the thresholds hold that margin.
 APPLY_CONTACT_TWIST = False
 
 
