@@ -304,8 +304,11 @@ def run_log(
         skip = (copy_only_columns(log) if plain and thresholds is None and compiled
                 and output.suffix.lower() != ".csv" else [])
         names = _parquet_names(log) if skip else []
+        # the block writer's input as numpy columns (no pandas: io/columns.py)
+        lite = plain and compiled and thresholds is None and output.suffix.lower() != ".csv"
         df = read_any(log, topics_map, time_order=time_order, copy=False,  # read-only columns
-                      columns=[c for c in names if c not in skip] if skip else None)
+                      columns=[c for c in names if c not in skip] if skip else None,
+                      frame=not lite)
     mark("read")
     robot_for_log(df, rob, str(log))
     if unit_check:
@@ -391,6 +394,9 @@ def _run_segments(df: Any, **kw: Any) -> Any:
     import pandas as pd
 
     kw["output"] = kw["source"] = None  # (a split log: read whole, nothing skipped)
+    from grfguard.io.columns import as_frame
+
+    df = as_frame(df)
     parts = []
     for k, part in df.groupby(SEGMENT, sort=False):
         seg = part.drop(columns=[SEGMENT]).reset_index(drop=True)
@@ -424,9 +430,12 @@ def _run_monitor(
     from grfguard.config import monitor_config
     from grfguard.detect.monitor import Monitor
     from grfguard.estimate.described import is_described, run_described
+    from grfguard.io.columns import as_frame
     from grfguard.io.runwriter import restore_columns
 
     batch = output is not None and output.suffix.lower() != ".csv"
+    if not batch or thresholds is not None or is_described(df):
+        df = as_frame(df)  # (only the block writer reads numpy columns)
     if skipped and (is_described(df) or thresholds is not None or not batch):
         df = restore_columns(df, source, skipped)  # (only the block writer copies them)
     if is_described(df) and df.attrs.get("sensing") == "ft":  # channel thresholds (issue 9)
@@ -450,6 +459,7 @@ def _run_monitor(
         n = write_run(mon, df, output, phase=mark, source=source, partial=bool(skipped))
         if n is not None:
             return n
+        df = as_frame(df)
     if skipped:  # the frame path writes every column
         df = restore_columns(df, source, skipped)
     return mon.run(df)

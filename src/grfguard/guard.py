@@ -27,15 +27,17 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from grfguard._validate import check_number
 from grfguard.io.plausibility import PlausibilityChecker
 from grfguard.io.schema import FORCE_COLUMNS, IMU_ACC, IMU_GYRO, IMU_QUAT, JOINT_COLUMNS
 from grfguard.model.robot import SENSOR_NAMES
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "Continuity",
@@ -137,6 +139,8 @@ class InputGuard:
                 masks.append(m)
         if not masks:
             return log, reasons
+        import pandas as pd
+
         mask = pd.concat(masks, axis=1)
         mask = mask.loc[:, ~mask.columns.duplicated()]
         arr = mask.to_numpy(dtype=bool)

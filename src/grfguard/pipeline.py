@@ -35,8 +35,8 @@ from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.detect.config import MonitorConfig, config_for_log
 from grfguard.detect.detector import VFS_TOTAL_COLUMNS, Detector
 from grfguard.detect.paper import PaperDetector
@@ -69,6 +69,8 @@ from grfguard.io.schema import (
 from grfguard.model.robot import SENSOR_NAMES, SIDES, RobotConfig
 from grfguard.recover.recovery import RecoverTuning, Recovery
 from grfguard.rotations import quat_to_matrix, rotation_to_quat
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 __all__ = ["Monitor"]
 

@@ -14,8 +14,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.detect.blocks import cusum as cusum_batch
 from grfguard.detect.blocks import excursion_peaks, robust_scale, threshold_for_rate
 from grfguard.detect.config import MonitorConfig, config_for_log
@@ -25,6 +25,8 @@ from grfguard.detect.thresholds import Thresholds
 from grfguard.errors import ConfigError
 from grfguard.io.schema import TIME, vfs_col
 from grfguard.model.robot import SENSOR_NAMES, SIDES
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 __all__ = ["calibrate_thresholds"]
 

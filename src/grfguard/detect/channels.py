@@ -45,10 +45,12 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.detect.blocks import cusum_step, excursion_peaks, robust_scale, threshold_for_rate
 from grfguard.errors import ConfigError, LogFormatError
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 __all__ = [
     "ChannelConfig", "ChannelMonitor", "ContactPhases", "calibrate_channels",

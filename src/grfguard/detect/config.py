@@ -14,12 +14,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.detect.observer import ObserverConfig
 from grfguard.detect.thresholds import Thresholds, default_thresholds
 from grfguard.errors import ConfigError
 from grfguard.io.schema import TIME
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 __all__ = ["METHODS", "MonitorConfig", "config_for_log"]
 

@@ -21,10 +21,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
-
+from grfguard._lazy import lazy_module
 from grfguard.errors import LogFormatError
 from grfguard.model.description import SIDES
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 #: Standard gravity [m/s^2].
 _G = 9.81

@@ -39,8 +39,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.errors import ConfigError, LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.kinematic import KinematicModel
@@ -54,6 +54,8 @@ from grfguard.io.schema import (
     vfs_col,
 )
 from grfguard.model.robot import SENSOR_NAMES, RobotConfig
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 __all__ = ["VFSConfig", "VirtualForceSensor", "VFS_OUTPUT_COLUMNS", "with_vfs_columns"]
 

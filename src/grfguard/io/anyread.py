@@ -4,10 +4,12 @@ Parquet/CSV log."""
 from __future__ import annotations
 
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from grfguard.errors import ConfigError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["read_any", "is_bag"]
 
@@ -24,12 +26,12 @@ def is_bag(path: str | Path) -> bool:
 
 def read_any(
     path: str | Path, topics_map: str | Path | None = None, time_order: str = "strict",
-    copy: bool = True, columns: list[str] | None = None,
+    copy: bool = True, columns: list[str] | None = None, frame: bool = True,
 ) -> pd.DataFrame:
     """The log in ``path``: a ROS bag (rosbag2 directory, ``.mcap``, ``.db3``, ROS 1
     ``.bag``) imported with ``topics_map`` (default: the example map), else a Parquet/CSV
-    log read with :func:`grfguard.io.logio.load_log` (``time_order``, ``copy`` and
-    ``columns`` as there).
+    log read with :func:`grfguard.io.logio.load_log` (``time_order``, ``copy``,
+    ``columns`` and ``frame`` as there; a bag is a DataFrame).
 
     Raises:
         ConfigError: A topics map was given for a file that is not a bag.
@@ -55,4 +57,4 @@ def read_any(
         )
     from grfguard.io.logio import load_log
 
-    return load_log(p, time_order=time_order, copy=copy, columns=columns)
+    return load_log(p, time_order=time_order, copy=copy, columns=columns, frame=frame)

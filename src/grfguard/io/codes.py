@@ -17,10 +17,12 @@ This is the one place where codes become names: the monitor's batch output
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["codes_to_str", "codes_to_categorical", "strings_to_str", "codes_to_arrow"]
 
@@ -49,6 +51,7 @@ def codes_to_str(codes: Any, names: Sequence[str]) -> Any:
     Raises:
         IndexError: A code is outside ``[0, len(names))``.
     """
+    import pandas as pd
     import pyarrow as pa
 
     idx = _index(codes, len(names))
@@ -83,16 +86,22 @@ def strings_to_str(values: Any) -> Any:
     """A sequence of Python strings as the same pandas string array as
     :func:`codes_to_str` (the few rows that carry their own text, such as
     ``system_reason``); a missing value (None) stays missing."""
+    import pandas as pd
+
     return pd.array(np.asarray(values, dtype=object), dtype=_str_dtype())
 
 
 def codes_to_categorical(codes: Any, names: Sequence[str]) -> pd.Categorical:
     """``names[codes]`` as a :class:`pandas.Categorical` with ``names`` as categories
     (the codes are kept, no strings are built)."""
+    import pandas as pd
+
     idx = _index(codes, len(names))
     return pd.Categorical.from_codes(idx, categories=list(names))
 
 
 def _str_dtype() -> Any:
     """The dtype pandas gives a column of Python strings (``str`` in pandas 3)."""
+    import pandas as pd
+
     return pd.Series(np.array([""], dtype=object)).dtype

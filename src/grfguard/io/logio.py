@@ -17,11 +17,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.errors import GrfguardWarning, LogFormatError
 from grfguard.io.safe import atomic_open, atomic_path
 from grfguard.io.schema import REQUIRED_INPUT_COLUMNS, TIME
+
+pd = lazy_module("pandas")  # (imported when first used: not by `grfguard run`)
 
 __all__ = [
     "read_log",
@@ -160,6 +162,7 @@ def read_log(
     time_order: str = "strict",
     gap_s: float | None = None,
     copy: bool = True,
+    frame: bool = True,
 ) -> pd.DataFrame:
     """Read a Parquet or CSV log and validate it.
 
@@ -188,6 +191,10 @@ def read_log(
             read-only numpy views of the file's Arrow buffers (for readers that never
             write into the frame, such as ``grfguard run``; about half the memory and
             time). True (default) gives ordinary writable columns.
+        frame: False (with ``copy=False``) returns a Parquet log whose columns are all
+            numbers or booleans without nulls as a
+            :class:`~grfguard.io.columns.LogColumns` (numpy columns, no pandas import:
+            ``grfguard run``); any other log is a DataFrame as always.
 
     Returns:
         The log, metadata in ``.attrs``.
@@ -209,12 +216,14 @@ def read_log(
     if path.suffix.lower() == ".csv":
         df, meta = _read_csv(path)
     else:
-        df, meta = _read_parquet(path, columns, copy)
+        df, meta = _read_parquet(path, columns, copy, frame)
     _check_metadata(meta, path)
     df.attrs.update(meta)
     df.attrs.setdefault("source", str(path))
     if TIME in df.columns and time_order != "strict" and len(df):
-        df = _repair_time(df, time_order, str(path))
+        from grfguard.io.columns import as_frame
+
+        df = _repair_time(as_frame(df), time_order, str(path))
     validate_log(df, required=required, where=str(path))
     gaps = find_time_gaps(df, gap_s)
     if gaps:
@@ -223,8 +232,8 @@ def read_log(
     return df
 
 
-def _read_parquet(path: Path, columns: Iterable[str] | None, copy: bool = True
-                  ) -> tuple[pd.DataFrame, Any]:
+def _read_parquet(path: Path, columns: Iterable[str] | None, copy: bool = True,
+                  frame: bool = True) -> tuple[pd.DataFrame, Any]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -239,7 +248,7 @@ def _read_parquet(path: Path, columns: Iterable[str] | None, copy: bool = True
                     raise KeyError(missing[0])
                 cols = [c for c in cols if c in names]
             table = _read_columns(pf, cols)
-        df = _table_to_frame(table, copy)
+        df = _table_to_frame(table, copy, frame)
     except KeyError as exc:
         raise LogFormatError(f"{path}: requested column {exc} is not in the file") from None
     except (pa.ArrowException, OSError, ValueError, TypeError, IndexError) as exc:
@@ -297,14 +306,23 @@ def _read_columns(pf: Any, cols: list[str] | None) -> Any:
     return table
 
 
-def _table_to_frame(table: Any, copy: bool) -> pd.DataFrame:
+def _table_to_frame(table: Any, copy: bool, frame: bool = True) -> pd.DataFrame:
     """``table.to_pandas()``; with ``copy=False`` the numeric and boolean columns without
     nulls are read-only numpy views of the Arrow buffers (the same dtypes and values,
-    no copy), the other columns converted as ``to_pandas`` does."""
+    no copy), the other columns converted as ``to_pandas`` does; with ``frame=False``
+    too and no other column, a :class:`~grfguard.io.columns.LogColumns` of them."""
     import pyarrow as pa
 
     if copy or table.schema.pandas_metadata is not None or not table.num_columns:
         return table.to_pandas()
+    if not frame and len(set(table.column_names)) == table.num_columns:
+        from grfguard.io.arrowcols import numpy_column
+        from grfguard.io.columns import LogColumns
+
+        cols = {n: numpy_column(c) for n, c in zip(table.column_names, table.columns,
+                                                       strict=True)}
+        if all(a is not None for a in cols.values()):  # (no pandas import: pyarrow's
+            return LogColumns(cols)                    # to_numpy would make one)
     data: dict[str, Any] = {}
     for name, col in zip(table.column_names, table.columns, strict=True):
         t = col.type
@@ -570,7 +588,7 @@ def validate_log(
             "grfguard.io.schema) requires them. Rename your columns or add them."
         )
     for c in [TIME, *req]:
-        if not pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c]):
+        if not _numeric_column(df[c]):
             raise LogFormatError(
                 f"{where}: column {c!r} must be numeric, found dtype {df[c].dtype}"
                 + _first_non_number(df[c])
@@ -602,6 +620,14 @@ def validate_log(
         )
 
 
+def _numeric_column(col: Any) -> bool:
+    """A column of numbers or booleans (numpy's dtypes decided without pandas)."""
+    dtype = getattr(col, "dtype", None)
+    if isinstance(dtype, np.dtype) and dtype.kind in "biuf":
+        return True
+    return bool(pd.api.types.is_numeric_dtype(col) or pd.api.types.is_bool_dtype(col))
+
+
 def _first_non_number(col: pd.Series) -> str:
     vals = pd.to_numeric(col, errors="coerce")
     bad = np.flatnonzero(vals.isna().to_numpy() & col.notna().to_numpy())
@@ -611,16 +637,17 @@ def _first_non_number(col: pd.Series) -> str:
 
 
 def load_log(path: str | Path, time_order: str = "strict", copy: bool = True,
-             columns: Iterable[str] | None = None) -> pd.DataFrame:
+             columns: Iterable[str] | None = None, frame: bool = True) -> pd.DataFrame:
     """Read a log (Parquet or CSV) for the virtual sensor and monitor.
 
     Checks that the input columns of the log contract are present (``time``, IMU,
     joint encoders, force sensors); timestamps, ``copy`` and ``columns`` (of a Parquet
-    file; None: all) as in :func:`read_log`. A described robot's log is read whole.
+    file; None: all) and ``frame`` as in :func:`read_log`. A described robot's log is
+    read whole (a DataFrame).
     """
     from grfguard.io.robot_schema import is_described_log, load_robot_log
 
-    df = read_log(path, time_order=time_order, copy=copy, columns=columns)
+    df = read_log(path, time_order=time_order, copy=copy, columns=columns, frame=frame)
     if is_described_log(df):  # Talos, G1, ...: columns from the robot description
         return load_robot_log(path)
     validate_log(df, required=REQUIRED_INPUT_COLUMNS, where=str(path))

@@ -37,9 +37,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard._validate import check_number
+
+pd = lazy_module("pandas")  # (imported when first used: not by `grfguard run`)
 
 __all__ = [
     "PlausibleRanges",
@@ -282,7 +284,8 @@ def clamp_recovered(values: Any, robot: Any, nan: float | None = None) -> Any:
         The same kind of object, every finite value within ``force_range(robot)``.
     """
     lo, hi = force_range(robot)
-    if isinstance(values, (pd.Series, pd.DataFrame)):
+    if not isinstance(values, (float, int, np.ndarray)) and isinstance(
+            values, (pd.Series, pd.DataFrame)):
         out = values.astype(float).clip(lower=lo, upper=hi)
         return out if nan is None else out.fillna(nan)
     if np.ndim(values) == 0:
@@ -309,7 +312,8 @@ _CHECKED = ("force_", "imu_acc_", "q_", "imu_quat_")
 
 def _numeric(frame: pd.DataFrame) -> np.ndarray:
     """``frame`` as a float array, text that is not a number as NaN."""
-    if all(pd.api.types.is_numeric_dtype(t) for t in frame.dtypes):
+    if all((isinstance(t, np.dtype) and t.kind in "biuf") or pd.api.types.is_numeric_dtype(t)
+           for t in frame.dtypes):
         return frame.to_numpy(dtype=float)
     return frame.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
 
@@ -396,7 +400,7 @@ def _check_joints(df: pd.DataFrame, r: PlausibleRanges) -> list[LogIssue]:
     out: list[LogIssue] = []
     for c in [c for c in df.columns if c.startswith("q_")]:
         lim = r.limits(c)
-        v = pd.to_numeric(df[c], errors="coerce").to_numpy(dtype=float)
+        v = _numeric(df[[c]])[:, 0]
         v = v[np.isfinite(v)]
         if lim is None or v.size < 10:
             continue

@@ -11,10 +11,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
-
+from grfguard._lazy import lazy_module
 from grfguard.errors import LogFormatError
 from grfguard.io.schema import IMU_ACC, IMU_GYRO, IMU_QUAT, TIME
+
+pd = lazy_module("pandas")  # (imported when first used: not by `grfguard run`)
 
 __all__ = ["robot_input_columns", "is_described_log", "load_robot_log"]
 

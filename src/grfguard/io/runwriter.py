@@ -201,13 +201,15 @@ def copy_only_columns(path: str | Path) -> list[str]:
 
 def restore_columns(log: Any, path: str | Path, names: list[str]) -> Any:
     """``log`` (read from ``path`` without the columns ``names``) with them read and put
-    back in the file's order (metadata kept)."""
+    back in the file's order (metadata kept); a DataFrame."""
     import pandas as pd
     import pyarrow.parquet as pq
 
+    from grfguard.io.columns import as_frame
     from grfguard.io.logio import _read_parquet
     from grfguard.io.schema import TIME
 
+    log = as_frame(log)
     names = [c for c in names if c not in log.columns]
     if not names:
         return log
@@ -346,24 +348,26 @@ def _arrow(values: Any) -> Any:
     anything else converted by pyarrow as ``from_pandas`` converts it."""
     import pyarrow as pa
 
+    from grfguard.io.arrowcols import number_array
+
+    if isinstance(values, pa.Array):  # (built from codes: grfguard.io.arrowcols)
+        return values
     dtype = getattr(values, "dtype", None)
     if isinstance(dtype, np.dtype) and dtype.kind in "biuf":
         a = np.asarray(values)
         if dtype == np.float64:
             return _float_array(a)
         if dtype.kind in "biu":
-            return pa.array(a)
+            return number_array(a)
     return pa.array(values, from_pandas=True)
 
 
 def _float_array(a: np.ndarray) -> Any:
-    """float64 ``a`` as Arrow (no copy of the values), NaN as null (the NaN search is
-    one ``min``: it propagates NaN, at half the cost of ``isnan(a).any()``)."""
-    import pyarrow as pa
+    """float64 ``a`` as Arrow (no copy of the values), NaN as null
+    (:func:`grfguard.io.arrowcols.float_array`: no pandas import)."""
+    from grfguard.io.arrowcols import float_array
 
-    if a.size and np.isnan(a.min()):
-        return pa.array(a, mask=np.isnan(a))
-    return pa.array(a)
+    return float_array(a)
 
 
 class _Blocks:
@@ -395,7 +399,8 @@ class _Blocks:
         """Rows ``a:b``. The float columns are views of the reused block buffer, or
         with ``keep`` (``n_float`` rows of at least ``b - a`` columns) of copies into
         ``keep``'s rows (they then outlive the next block)."""
-        import pyarrow as pa
+        from grfguard.io.arrowcols import bool_array, strings_from_codes
+        from grfguard.io.columns import as_frame
 
         km, k = self.km, self.k
         m = b - a
@@ -411,24 +416,17 @@ class _Blocks:
                     i += 1
                 new[name] = _float_array(Y[:, j] if keep is None else keep[i - 1, :m])
             elif typ == "flag":
-                new[name] = pa.array(Y[:, j] != 0.0)
+                new[name] = bool_array(Y[:, j] != 0.0)
             elif typ == "kind":
-                new[name] = _names(Y[:, j], km.KIND_NAMES)
+                new[name] = strings_from_codes(Y[:, j], km.KIND_NAMES)
             elif typ == "mismatch_reason":
-                new[name] = _arrow(km._mismatch_reasons(Y[:, j:], k.vib_config))
+                new[name] = km._mismatch_reasons(Y[:, j:], k.vib_config,
+                                                 to=strings_from_codes)
             elif typ == "state":
-                new[name] = _names(Y[:, j], km.SYSTEM_STATES)
-            else:  # "reason"
-                part = self.log.iloc[a:b] if (EX[:, 0] != 0.0).any() else None
+                new[name] = strings_from_codes(Y[:, j], km.SYSTEM_STATES)
+            else:  # "reason" (a row with its own text: the input guard's, on a frame)
+                part = as_frame(self.log.iloc[a:b]) if (EX[:, 0] != 0.0).any() else None
                 new[name] = _arrow(km._reasons(self.mon, part, Y[:, j].astype(np.int64),
-                                               self.src[0][a:b], EX))
+                                               self.src[0][a:b], EX, to=strings_from_codes))
         return {c: (new[c] if c in new else self.keep[c].slice(a, m)) for c in self.order
                 if c not in self.raw}
-
-
-def _names(codes: np.ndarray, names: Any) -> Any:
-    """``names[codes]`` as an Arrow ``large_string`` array (the type pandas' ``str``
-    columns are written with)."""
-    from grfguard.io.codes import codes_to_arrow
-
-    return codes_to_arrow(codes, names)

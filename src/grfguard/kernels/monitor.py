@@ -35,10 +35,9 @@ Row layouts (:func:`input_columns`, :func:`output_columns`):
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from grfguard.guard import ESTIMATOR_INPUTS, SYSTEM_STATES
 from grfguard.io.codes import codes_to_str, strings_to_str
@@ -92,6 +91,9 @@ from grfguard.kernels.vfs import (
     vfs_step,
 )
 from grfguard.model.robot import SENSOR_NAMES, SIDES
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["input_columns", "output_columns", "monitor_step",
            "monitor_run", "MonitorKernel", "update_dict", "run_frame", "dict_to_row",
@@ -701,11 +703,16 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
 
 
 def _column(log: pd.DataFrame, c: str) -> np.ndarray:
+    """Column ``c`` of ``log`` (a DataFrame, or a mapping of numpy arrays) as floats
+    (text that is no number: NaN)."""
     col = log[c]
     try:
-        return col.to_numpy(dtype=float)
+        return col.to_numpy(dtype=float) if hasattr(col, "to_numpy") else np.asarray(
+            col, dtype=float)
     except (TypeError, ValueError):
-        return pd.to_numeric(col, errors="coerce").to_numpy(dtype=float)
+        import pandas as pd
+
+        return pd.to_numeric(pd.Series(col), errors="coerce").to_numpy(dtype=float)
 
 
 def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = 1 << 12
@@ -784,9 +791,11 @@ def output_rows(k: MonitorKernel) -> list[tuple[str, str, int]]:
     return [*out, ("system_state", "state", o + 32), ("system_reason", "reason", o + 32)]
 
 
-def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> Any:
+def _mismatch_reasons(S: np.ndarray, vib_config: Any, to: Any = None) -> Any:
     """``model_mismatch_reason`` of every row of the system columns ``S`` (one text per
-    distinct row, the column built from codes: no string object per row)."""
+    distinct row, the column built from codes: no string object per row) as ``to(codes,
+    names)`` gives it (default :func:`~grfguard.io.codes.codes_to_str`: a pandas string
+    array; :func:`~grfguard.io.codes.codes_to_arrow`: Arrow, no pandas)."""
     idx = np.zeros(S.shape[0], dtype=np.int64)
     names = [""]
     memo: dict[bytes, int] = {}
@@ -797,26 +806,29 @@ def _mismatch_reasons(S: np.ndarray, vib_config: Any) -> Any:
             j = memo[key] = len(names)
             names.append(reason_text(S[r].tolist(), vib_config))
         idx[r] = j
-    return codes_to_str(idx, names)
+    return (codes_to_str if to is None else to)(idx, names)
 
 
 def _reasons(mon: Any, log: pd.DataFrame, codes: np.ndarray, t_raw: np.ndarray,
-             EX: np.ndarray) -> Any:
+             EX: np.ndarray, to: Any = None) -> Any:
     """The ``system_reason`` column: empty where the state is ``ok``, text built only
-    for the other rows (no string object per row)."""
+    for the other rows (no string object per row); built from codes by ``to`` as in
+    :func:`_mismatch_reasons` (rows with their own text, ``EX[:, 0]``: a pandas string
+    array of ``log``'s rows, read only then)."""
+    to = codes_to_str if to is None else to
     n = len(codes)
     base: list[str] | None = None
     if (EX[:, 0] != 0.0).any():
         base = mon.inputs.clean_frame(log)[1]
     rows = np.flatnonzero(codes != ST_OK)
     if base is None and rows.size == 0:
-        return codes_to_str(np.zeros(n, dtype=np.int64), ("",))
+        return to(np.zeros(n, dtype=np.int64), ("",))
     texts = [_reason(SYSTEM_STATES[codes[r]], float(t_raw[r]), float(EX[r, 1]),
                      EX[r, 2] != 0.0, base[r] if base is not None else "") for r in rows]
     if base is None:  # names: "" and each text; codes point at them
         idx = np.zeros(n, dtype=np.int64)
         idx[rows] = np.arange(1, rows.size + 1)
-        return codes_to_str(idx, ("", *texts))
+        return to(idx, ("", *texts))
     reasons = np.array(base, dtype=object)
     reasons[rows] = texts
     return strings_to_str(reasons)
@@ -825,6 +837,8 @@ def _reasons(mon: Any, log: pd.DataFrame, codes: np.ndarray, t_raw: np.ndarray,
 def _with_columns(log: pd.DataFrame, new: dict[str, Any]) -> pd.DataFrame:
     """A copy of ``log`` with the columns ``new`` (replaced in place when ``log`` has
     them, else appended in order), built in one go."""
+    import pandas as pd
+
     bare = log
     add = pd.DataFrame(new, index=log.index, copy=False)  # fresh arrays: no copy needed
     if not any(c in bare.columns for c in new):

@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from grfguard.errors import LogFormatError
 from grfguard.estimate.config import VFSConfig
@@ -69,6 +69,9 @@ from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     valid_paper_inputs,
     zmp_kalman,
 )
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["IN_COLUMNS", "OUT_COLUMNS", "VFSKernel", "vfs_step", "vfs_run", "vfs_batch",
            "vfs_step_shared", "resolve_pending", "same_front_state",
@@ -1151,7 +1154,7 @@ _TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT, _P_TWIST)
 
 def _check_twist_layout(points_F: np.ndarray) -> None:
     """``VFSConfig.contact_twist`` needs the sole corners front-left, front-right,
-    rear-left, rear-right (the twist pattern of :func:`_contact_twist`)."""
+    rear-left, rear-right (the twist pattern of :func:`_twist_prior`)."""
     from grfguard.errors import ConfigError
 
     p = np.asarray(points_F, float)
@@ -1231,7 +1234,8 @@ class VFSKernel:
         cfg: VFSConfig = vfs.config
         kin = vfs.kin
         self.config = cfg
-        self.tree = TreeModel.from_mujoco(kin.model)
+        # (from the cached summary of the model: a batch run does not import MuJoCo)
+        self.tree = kin.tree() if hasattr(kin, "tree") else TreeModel.from_mujoco(kin.model)
         tm = self.tree
         self.tree_arrays = tm.arrays()
         self.site_arrays = (tm.site_body, tm.site_sameframe, tm.site_pos, tm.site_quat)
@@ -1399,6 +1403,8 @@ def log_to_array(log: pd.DataFrame | Mapping[str, np.ndarray],
                  columns: tuple[str, ...] = IN_COLUMNS) -> tuple[np.ndarray, bool, bool]:
     """Input array (T, 24) from a log (``columns``: another layout, e.g.
     :data:`PAPER_IN_COLUMNS`), and whether it has the gyro and the planned contact."""
+    import pandas as pd
+
     cols = log.columns if isinstance(log, pd.DataFrame) else list(log)
     n = len(log) if isinstance(log, pd.DataFrame) else len(next(iter(log.values())))
     X = np.full((n, len(columns)), np.nan)
@@ -1412,6 +1418,8 @@ def log_to_array(log: pd.DataFrame | Mapping[str, np.ndarray],
 
 def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
     """Compiled ``VirtualForceSensor.for_log(log).run(log)``: same columns and index."""
+    import pandas as pd
+
     from grfguard.estimate.vfs import VirtualForceSensor
 
     if vfs is None:

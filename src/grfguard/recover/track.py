@@ -39,9 +39,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
+from grfguard._lazy import lazy_module
 from grfguard.errors import ConfigError
+
+pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
 __all__ = ["TRACKED_KINDS", "ForceTracker", "TrackConfig", "alpha_beta_gains",
            "track_recovered"]
