@@ -148,3 +148,14 @@ def test_contact_twist_twists_only_the_loaded_flat_soles(walk):
 def test_contact_twist_out_of_range_is_refused():
     with pytest.raises(Exception, match="contact_twist"):
         VFSConfig(contact_twist=9.0)
+
+
+def test_contact_twist_needs_the_front_left_first_sole_layout():
+    from grfguard.errors import ConfigError
+    from grfguard.kernels.vfs import _check_twist_layout
+    from grfguard.model.robot import SURALP
+
+    p = SURALP.sensor_positions_in_foot()
+    _check_twist_layout(p)  # front-left, front-right, rear-left, rear-right
+    with pytest.raises(ConfigError, match="front-left, front-right, rear-left, rear-right"):
+        _check_twist_layout(p[[0, 2, 1, 3]])
