@@ -27,6 +27,7 @@ CONFIGS = {
     "kalman_zmp": VFSConfig(use_accelerometer=False, zmp_filter="kalman"),
     "anchor_attitude": VFSConfig(anchor_attitude_time_constant=1.0),
     "rigid_qp": VFSConfig(contact_stiffness_per_kg=0.0),
+    "contact_twist": VFSConfig(use_accelerometer=False, contact_twist=0.42),
     "paper_anchor_no_dob": VFSConfig.paper(anchor_attitude_time_constant=0.5,
                                            paper_dob_gain=0.0, lipm_height=0.75),
 }
@@ -115,3 +116,46 @@ def test_paper_bad_samples_held_like_python_stages(walk):
     assert out["vfs_valid"].iloc[200:205].eq(0).all() and out["vfs_valid"].iloc[400] == 0
     assert out["vfs_valid"].iloc[600:700].eq(1).all()
     np.testing.assert_array_equal(out["vfs_r1"].iloc[200:205], out["vfs_r1"].iloc[199])
+
+
+def test_contact_twist_twists_only_the_loaded_flat_soles(walk):
+    """``VFSConfig.contact_twist``: where the planar split loads all four corners of a sole
+    and the twisted one still does, the sole's load and centre of pressure (``P``, ``R``)
+    stay and its twist becomes ``f1 - f2 - f3 + f4 = kappa P R / S``; a sole in the air
+    does not move; no corner goes below 0."""
+    base = VFSConfig(use_accelerometer=False)
+    a = VirtualForceSensor.for_log(walk, base).run(walk)
+    b = VirtualForceSensor.for_log(walk, base.replace(contact_twist=0.42)).run(walk)
+    for side in "rl":
+        fa = a[[f"vfs_{side}{k}" for k in range(1, 5)]].to_numpy(float)
+        fb = b[[f"vfs_{side}{k}" for k in range(1, 5)]].to_numpy(float)
+        both = np.all(fa > 0, axis=1) & np.all(fb > 0, axis=1)
+        single = both & (b[f"contact_est_{'l' if side == 'r' else 'r'}"].to_numpy() == 0)
+        for pat in ((1, 1, 1, 1), (1, 1, -1, -1), (1, -1, 1, -1)):
+            np.testing.assert_allclose((fb @ np.array(pat))[single],
+                                       (fa @ np.array(pat))[single], atol=1e-6)
+        P, R, S = (fa[single] @ np.array(p) for p in ((1, 1, -1, -1), (1, -1, 1, -1),
+                                                      (1, 1, 1, 1)))
+        T = fb[single] @ np.array([1, -1, -1, 1])
+        assert single.sum() > 1000
+        np.testing.assert_allclose(T, 0.42 * P * R / S, rtol=1e-6, atol=1e-6)
+        assert np.abs(T).max() > 5.0  # the twist is not negligible on this walk
+        air = np.all(fa == 0, axis=1)
+        np.testing.assert_array_equal(fb[air], 0.0)
+        assert np.all(fb >= 0)
+
+
+def test_contact_twist_out_of_range_is_refused():
+    with pytest.raises(Exception, match="contact_twist"):
+        VFSConfig(contact_twist=9.0)
+
+
+def test_contact_twist_needs_the_front_left_first_sole_layout():
+    from grfguard.errors import ConfigError
+    from grfguard.kernels.vfs import _check_twist_layout
+    from grfguard.model.robot import SURALP
+
+    p = SURALP.sensor_positions_in_foot()
+    _check_twist_layout(p)  # front-left, front-right, rear-left, rear-right
+    with pytest.raises(ConfigError, match="front-left, front-right, rear-left, rear-right"):
+        _check_twist_layout(p[[0, 2, 1, 3]])

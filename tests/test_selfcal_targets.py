@@ -19,6 +19,7 @@ from grfguard.calib import (
     choose_twin_filter,
     corrected_config,
     estimate_corrections,
+    selfcal,
 )
 from grfguard.detect import Monitor, MonitorConfig, calibrate_thresholds
 from grfguard.detect.system import quiet_vfs_config
@@ -194,3 +195,49 @@ def test_calibration_chooses_records_and_uses_the_twin_filter(gap, cal_walk, cor
     assert not np.allclose(out["vfs_r1"], butter["vfs_r1"])  # the damped filter, not 10 Hz
     with pytest.raises(ConfigError, match="twin_filter_damping"):
         dataclasses.replace(chosen, twin_filter_damping=0.05)
+
+
+def test_contact_twist_is_fitted_recorded_and_brings_the_twin_closer(cal_walk, corr_m,
+                                                                      tmp_path, monkeypatch):
+    """The all-gaps robot walks with its trunk CoM 3 cm off in x and y, so the stance
+    sole's centre of pressure sits off its centre in both axes and the nonlinear contact
+    twists the sole's load (20-50 N) where the planar split says 0. The fitted twist
+    coefficient is near MuJoCo's (0.42 on the true forces of exact-model walks), survives
+    the calibration file, and brings the accelerometer-free sensor's single-support corner
+    forces closer to the corrected readings; the corrected monitor applies it only with
+    ``APPLY_CONTACT_TWIST`` (off: its lower threshold flags other walks, BENCHMARKS.md)."""
+    k = corr_m.contact_twist
+    assert k is not None and 0.3 < k < 0.55 and corr_m.sigma["contact_twist"] < 0.05
+    assert f"contact twist {k:.2f}" in corr_m.summary()
+    p = tmp_path / "th.toml"
+    p.write_text(corr_m.to_toml())
+    back = ModelCorrections.from_toml(p)
+    assert back.contact_twist == pytest.approx(k)
+    cfg = corrected_config(MonitorConfig(), back)
+    assert cfg.vfs.contact_twist == 0.0  # APPLY_CONTACT_TWIST off: monitor unchanged
+    monkeypatch.setattr(selfcal, "APPLY_CONTACT_TWIST", True)
+    assert corrected_config(MonitorConfig(), back).vfs.contact_twist == pytest.approx(k)
+    d = corr_m.to_dict()
+    d.pop("contact_twist")
+    old = ModelCorrections.from_dict(d)  # a file written before the twist
+    assert old.contact_twist is None
+    assert corrected_config(MonitorConfig(), old).vfs.contact_twist == 0.0
+    lc = apply_corrections(cal_walk, back)
+    cfg = cfg.replace(vfs=cfg.vfs.replace(contact_twist=k))
+    x = lc[[f"force_{s}" for s in SENSOR_NAMES]].to_numpy(float)
+    ref = lc[["contact_ref_r", "contact_ref_l"]].to_numpy(float) > 0.5
+    planar = VirtualForceSensor.for_log(lc, cfg.vfs.replace(contact_twist=0.0)).run(lc)
+    twisted = VirtualForceSensor.for_log(lc, cfg.vfs).run(lc)
+    tw = np.array([1.0, -1.0, -1.0, 1.0])
+    err = {"planar": [], "twisted": []}
+    for si, side in enumerate("rl"):
+        cols = [f"vfs_{side}{k}" for k in range(1, 5)]
+        xs = x[:, 4 * si:4 * si + 4]
+        # stance sole in single support, flat: the four cells and corners loaded
+        m = (ref[:, si] & ~ref[:, 1 - si] & (xs.min(axis=1) > 0.02 * SURALP.weight)
+             & (planar[cols].to_numpy(float).min(axis=1) > 0))
+        for name, out in (("planar", planar), ("twisted", twisted)):
+            err[name].append(((xs - out[cols].to_numpy(float)) @ tw)[m])
+    rms = {k: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for k, v in err.items()}
+    print(f"flat stance sole twist error RMS: {rms['twisted']:.2f} N, planar {rms['planar']:.2f} N")
+    assert rms["twisted"] < 0.7 * rms["planar"]

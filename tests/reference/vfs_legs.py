@@ -203,9 +203,11 @@ def split_with_prior(
     total_force_n: np.ndarray,
     weight: float,
     stiffness_n_m: float,
+    extra_prior: np.ndarray | None = None,
 ) -> np.ndarray:
     """Batch over T samples: corners (T, n, 3) in world [m], contact (T, n), ZMP (T, 2) [m],
-    total force (T,) [N]; returns (T, n) forces [N]."""
+    total force (T,) [N]; returns (T, n) forces [N]. ``extra_prior`` (T, n) [N] is added
+    to the prior (the contact twist)."""
     # vectorized prior (same arithmetic as compliance_prior)
     z = corners_W[:, :, 2]
     cnt = contact.sum(axis=1)
@@ -214,5 +216,7 @@ def split_with_prior(
     prior = np.where(
         contact, (total_force_n / safe)[:, None] + stiffness_n_m * (zbar[:, None] - z), 0.0
     )
+    if extra_prior is not None:
+        prior = prior + extra_prior
     rel = corners_W[:, :, :2] - zmp_W[:, None, :]
     return qp_split(rel, prior, total_force_n, weight, contact)

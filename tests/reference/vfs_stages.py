@@ -315,6 +315,22 @@ class _Inputs:
         return _Inputs(*(None if v is None else v[idx] for v in vals))
 
 
+def twist_prior(forces: np.ndarray, contact: np.ndarray, kappa: float) -> np.ndarray:
+    """(T, 8) prior change [N] putting the contact twist ``f1 - f2 - f3 + f4 = kappa P R
+    / S`` (``VFSConfig.contact_twist``) of the split ``forces`` on each sole whose four
+    corners are in contact."""
+    out = np.zeros_like(forces)
+    for o in (0, 4):
+        f1, f2, f3, f4 = (forces[:, o + k] for k in range(4))
+        S = f1 + f2 + f3 + f4
+        ok = np.all(contact[:, o:o + 4], axis=1) & (S > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q = 0.25 * (kappa * (f1 + f2 - f3 - f4) * (f1 - f2 + f3 - f4) / S)
+        q = np.where(ok, q, 0.0)
+        out[:, o:o + 4] = q[:, None] * np.array([1.0, -1.0, -1.0, 1.0])
+    return out
+
+
 class PythonVFS:
     """The virtual force sensor's stages in numpy, streaming (``update``) and batch
     (``run``): the reference of :class:`grfguard.estimate.vfs.VirtualForceSensor`.
@@ -706,6 +722,10 @@ class PythonVFS:
             forces = split_with_prior(
                 p_WK, contact, zmp, force[:, 2], c.qp_weight, self.contact_stiffness
             )
+            if c.contact_twist != 0.0:  # second solve, the twist of the first in the prior
+                forces = split_with_prior(
+                    p_WK, contact, zmp, force[:, 2], c.qp_weight, self.contact_stiffness,
+                    twist_prior(forces, contact, c.contact_twist))
         else:
             forces = split_qp(p_WK[:, :, :2], contact, zmp, force[:, 2], c.qp_weight)
         return forces, contact.reshape(-1, 2, 4).any(axis=2)

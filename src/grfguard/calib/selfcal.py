@@ -29,6 +29,14 @@ Uses only the redundancy of fault-free walking (no simulation truth):
   samples (:func:`_still`, encoders only) are then exact rows (``a_z = 0``), see
   :func:`_posed_static_rows`, and posed soles are left out of the flat-sole fits
   (:func:`_soles_parallel`).
+* **Contact twist** ``kappa``: a loaded flat sole's load is not planar on a contact whose
+  stiffness grows with penetration: ``f1 - f2 - f3 + f4 = kappa P R / S`` (``S`` the
+  sole's load, ``P`` front minus rear, ``R`` left minus right corners), large when the
+  centre of pressure sits off the sole's centre in both axes (a trunk CoM a few cm off:
+  20-50 N), which the virtual sensor's planar split misses. Least squares over single
+  support samples with all four corrected cells loaded (:func:`_fit_contact_twist`),
+  written into the calibration file; the corrected monitor does not apply it yet
+  (``APPLY_CONTACT_TWIST``).
 * **Trunk CoM** (horizontal): the time average of the ZMP equals that of the CoM
   (the mean horizontal acceleration of a walk from rest to rest is zero), so the mean of
   ``CoP - CoM_model`` (corrected forces and attitude, trunk-yaw frame) is
@@ -122,6 +130,20 @@ POSED_MIN_S = 1.0
 STATIC_ROW_WEIGHT = 100.0
 #: Accelerometer RMS above 10 Hz [m/s^2] up to which it is used in the gain fit.
 ACC_QUIET_RMS = 0.2
+#: Contact twist fit (:func:`_fit_contact_twist`): least corrected load of each of the
+#: four cells of the stance sole (fraction of the weight) and least number of samples.
+TWIST_MIN_CELL_LOAD = 0.02
+TWIST_MIN_SAMPLES = 500
+#: Give the fitted contact twist to the corrected monitor's accelerometer-free sensor
+#: (:func:`corrected_config`, ``VFSConfig.contact_twist``). Measured on the all-gaps
+#: robot (BENCHMARKS.md "Model self-calibration: contact twist"): it takes the sole's
+#: twist error in flat single support from 46 to 28 N RMS and the calibrated per-corner
+#: threshold from 2.02x to 1.76x the exact model's, but the lower threshold then flags
+#: healthy sensors on 4 of the 10 minutes of other walks (5 episodes; seed 11: r2 at heel
+#: lift, where the error left is the centre of pressure's lag, not the twist: the same
+#: alarm with the planar sensor at that threshold, none with the twist at the old one).
+#: So off until the thresholds hold that margin.
+APPLY_CONTACT_TWIST = False
 
 
 def _rpy_to_R(rpy_rad: np.ndarray) -> np.ndarray:
@@ -171,6 +193,11 @@ class ModelCorrections:
             when ``use_accelerometer`` is False.
         twin_filter_damping: Damping ratio of that low-pass (``VFSConfig.filter_damping``);
             None: the Butterworth.
+        contact_twist: Twist of a loaded flat sole's load, ``f1 - f2 - f3 + f4 =
+            kappa P R / S`` (:func:`_fit_contact_twist`), for the accelerometer-free
+            virtual sensor (``VFSConfig.contact_twist``; applied by
+            :func:`corrected_config` only with ``APPLY_CONTACT_TWIST``); None: not
+            fitted (files written before it).
     """
 
     mass_kg: float | None = None
@@ -194,6 +221,7 @@ class ModelCorrections:
     )
     twin_filter_cutoff_hz: float | None = None
     twin_filter_damping: float | None = None
+    contact_twist: float | None = None
 
     def __post_init__(self) -> None:
         from grfguard._validate import check_number
@@ -205,6 +233,9 @@ class ModelCorrections:
         if self.twin_filter_damping is not None:
             check_number("model_corrections", "twin_filter_damping",
                          self.twin_filter_damping, 0.2, 2.0, "", fix)
+        if self.contact_twist is not None:
+            check_number("model_corrections", "contact_twist", self.contact_twist,
+                         -5.0, 5.0, "", fix)
         for name in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
             v = tuple(float(x) for x in getattr(self, name))
             if len(v) != 3 or not all(math.isfinite(x) for x in v):
@@ -231,7 +262,7 @@ class ModelCorrections:
         d = dataclasses.asdict(self)
         for k in ("imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2"):
             d[k] = list(d[k])
-        for k in ("mass_kg", "twin_filter_cutoff_hz", "twin_filter_damping"):
+        for k in ("mass_kg", "twin_filter_cutoff_hz", "twin_filter_damping", "contact_twist"):
             if d[k] is None:  # TOML has no null: a missing key is None
                 del d[k]
         return d
@@ -301,13 +332,14 @@ class ModelCorrections:
         )
 
     def _twin_filter_text(self) -> str:
-        """The accelerometer-free sensor's rate low-pass, for :meth:`summary`."""
+        """The accelerometer-free sensor's rate low-pass and contact twist, for :meth:`summary`."""
+        tw = "" if self.contact_twist is None else f"; contact twist {self.contact_twist:.2f}"
         if self.twin_filter_cutoff_hz is None and self.twin_filter_damping is None:
-            return ""
+            return tw
         z = self.twin_filter_damping
         cut = self.twin_filter_cutoff_hz
         return (f"; rate low-pass {'default' if cut is None else f'{cut:g} Hz'}, "
-                + ("Butterworth" if z is None else f"damping {z:g}"))
+                + ("Butterworth" if z is None else f"damping {z:g}") + tw)
 
 
 # ---------------------------------------------------------------------- helpers
@@ -412,7 +444,8 @@ def estimate_corrections(
     The stages run in order: load-cell zeros (:func:`_fit_zeros`), gyro bias
     (:func:`_fit_gyro_bias`), accelerometer bias (:func:`_fit_acc_bias`), IMU mounting
     (:func:`_fit_imu_mount`), then twice gains and mass (:func:`_fit_gains`) and the
-    trunk CoM (:func:`_fit_trunk_com`).
+    trunk CoM (:func:`_fit_trunk_com`), then the contact twist
+    (:func:`_fit_contact_twist`).
 
     Args:
         logs: One or more fault-free logs (log contract; ``contact_ref_*`` needed) of the
@@ -475,7 +508,36 @@ def estimate_corrections(
             trunk_com_y=robot.trunk_com_y + float(d_com[1]))
         mass, gains = _fit_gains(data, rob_fit, zero, b_a, R_BI, measured_mass_kg, sigma, odo)
         d_com = _fit_trunk_com(data, robot, mass, gains, zero, R_BI, sigma)
-    return build(mass, gains, d_com)
+    twist = _fit_contact_twist(data, robot, zero, gains, sigma)
+    return dataclasses.replace(build(mass, gains, d_com), contact_twist=twist)
+
+
+def _fit_contact_twist(data: list, robot: RobotConfig, zero: np.ndarray, gains: np.ndarray,
+                       sigma: dict[str, float]) -> float | None:
+    """Stage 7: the contact twist ``kappa`` (:class:`ModelCorrections`): least squares of
+    ``T = f1 - f2 - f3 + f4`` on ``u = P R / S`` over planned single support samples
+    (away from contact changes) whose four corrected cells each carry more than
+    ``TWIST_MIN_CELL_LOAD`` of the weight (the sole flat on the ground), both soles.
+    None with fewer than ``TWIST_MIN_SAMPLES`` of them."""
+    T, u = [], []
+    for d in data:
+        fc = (d.f - zero) / gains
+        edge = _away_from_edges(d.cref, d.dt)
+        for si in range(2):
+            f = fc[:, 4 * si : 4 * si + 4]
+            m = ((d.cref[:, si] > 0.5) & (d.cref[:, 1 - si] < 0.5) & edge
+                 & (f.min(axis=1) > TWIST_MIN_CELL_LOAD * robot.weight))
+            f1, f2, f3, f4 = f[m].T
+            T.append(f1 - f2 - f3 + f4)
+            u.append((f1 + f2 - f3 - f4) * (f1 - f2 + f3 - f4) / (f1 + f2 + f3 + f4))
+    T_all, u_all = np.concatenate(T), np.concatenate(u)
+    if len(T_all) < TWIST_MIN_SAMPLES or not np.any(u_all):
+        return None
+    kappa = float(u_all @ T_all / (u_all @ u_all))
+    res = T_all - kappa * u_all
+    n_eff = max(1.0, len(res) * data[0].dt / 0.05)
+    sigma["contact_twist"] = float(np.std(res) / (math.sqrt(n_eff) * np.sqrt(np.mean(u_all**2))))
+    return kappa
 
 
 def _fit_zeros(data: list, sigma: dict[str, float]) -> np.ndarray:
@@ -907,7 +969,8 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     in the calibration data (``corr.use_accelerometer`` False), the monitor's quiet twin
     (:func:`grfguard.detect.system.quiet_vfs_config`: no accelerometer, rate low-pass at
     10 Hz, or the cut-off and damping chosen on the calibration data,
-    ``corr.twin_filter_cutoff_hz`` / ``corr.twin_filter_damping``) from the start.
+    ``corr.twin_filter_cutoff_hz`` / ``corr.twin_filter_damping``; with the fitted
+    contact twist ``corr.contact_twist`` when ``APPLY_CONTACT_TWIST``) from the start.
     Unchanged when ``corr`` is None or the accelerometer was quiet."""
     from grfguard.detect import MonitorConfig
     from grfguard.detect.system import quiet_vfs_config
@@ -920,6 +983,8 @@ def corrected_config(config: Any, corr: ModelCorrections | None) -> Any:
     if vfs.com_method != "multibody":  # the paper's LIPM filter: nothing to switch
         return cfg
     quiet = quiet_vfs_config(vfs)
+    if APPLY_CONTACT_TWIST and corr.contact_twist is not None:
+        quiet = quiet.replace(contact_twist=float(corr.contact_twist))
     if corr.twin_filter_cutoff_hz is not None or corr.twin_filter_damping is not None:
         cut = corr.twin_filter_cutoff_hz
         quiet = quiet.replace(filter_cutoff=quiet.filter_cutoff if cut is None else cut,

@@ -117,6 +117,15 @@ class VFSConfig:
     #: 114 kg reference robot: 4.8e5 N/m; a 60 kg one: 2.5e5 N/m); calibrate it for a
     #: real sole. 0 disables the prior.
     contact_stiffness_per_kg: float = 4200.0
+    #: Twist of a loaded flat sole from the contact's nonlinear stiffness: with all four
+    #: corners in contact, ``f1 - f2 - f3 + f4 = contact_twist * P R / S`` (``S`` the
+    #: sole's load, ``P`` front minus rear, ``R`` left minus right corners; corners
+    #: front-left, front-right, rear-left, rear-right), which the planar compliance prior
+    #: leaves at 0. MuJoCo's soft contact measured 0.42 on the simulated robots (it
+    #: matters when the centre of pressure sits off the sole's centre in both axes, e.g.
+    #: a trunk CoM a few cm off: up to 50 N); fitted from fault-free data by
+    #: ``grfguard calibrate --model`` (``ModelCorrections.contact_twist``). 0 disables it.
+    contact_twist: float = 0.0
     #: Corner height above the ground plane below which a corner counts as touching, in [m]
     #: (kinematic contact; heel-first landing and toe-off).
     contact_height: float = 0.003
@@ -198,6 +207,7 @@ class VFSConfig:
         _num("com_acc_psd", self.com_acc_psd, 1e-12, 1e6, "m^2/s^3")
         _num("com_sigma", self.com_sigma, 1e-9, 1.0, "m")
         _num("contact_stiffness_per_kg", self.contact_stiffness_per_kg, 0.0, 1e8, "N/(m kg)")
+        _num("contact_twist", self.contact_twist, -5.0, 5.0, "")
         _num("contact_height", self.contact_height, 0.0, 0.1, "m")
         _num("lipm_height", self.lipm_height, 0.0, 5.0, "m")
         _num("paper_process_noise", self.paper_process_noise, 1e-12, 1e12, "m^2/s^5")

@@ -102,7 +102,8 @@ _P_DT, _P_KATT, _P_CH, _P_G, _P_MASS, _P_KC, _P_SW = 0, 1, 2, 3, 4, 5, 6
 _P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10, 11, 12
 _P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
 _P_ANCHOR_HOLD = 40  # VFSConfig.anchor_hold (after the vfs_paper block)
-N_PRM = 41  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
+_P_TWIST = 41  # VFSConfig.contact_twist
+N_PRM = 42  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
 # int parameters (iprm)
 _IP_TRUNK, _IP_ROOT, _IP_JOINTS = 0, 1, 2
 _IP_IMU = _IP_JOINTS + _NJ
@@ -833,6 +834,12 @@ def _force_split(prm, ws, iws, nq, nb, F2, zmp0, zmp1):
             relc[c, 1] = rel8[cidx[c], 1]
         _warm_qp(ctc, cidx, m, relc, tmp8, F2, prm[_P_SW], qp_x, qp_z, qp_free, qp_isfree, qp_M,
                  qp_rhs, qp_dots, warm)
+        if prm[_P_TWIST] != 0.0 and _twist_prior(prm[_P_TWIST], ctc, cidx, m, qp_x, F2,
+                                                 forces, prior8):
+            for c in range(m):
+                tmp8[c] = prior8[cidx[c]]
+            _warm_qp(ctc, cidx, m, relc, tmp8, F2, prm[_P_SW], qp_x, qp_z, qp_free, qp_isfree,
+                     qp_M, qp_rhs, qp_dots, warm)
         if m == 8:
             sx = _sum8(qp_x)
         else:
@@ -843,6 +850,39 @@ def _force_split(prm, ws, iws, nq, nb, F2, zmp0, zmp1):
                 qp_x[c] = qp_x[c] * f
         for c in range(m):
             forces[cidx[c]] = qp_x[c]
+
+
+@njit_nort
+def _twist_prior(kt, ctc, cidx, m, qp_x, F2, forces, prior8):
+    """Add the contact twist (``VFSConfig.contact_twist`` ``kt``) of the split ``qp_x``
+    (its ``m`` corners ``cidx``, scaled to ``F2``) to the prior ``prior8`` of each sole
+    whose four corners are in contact: ``f1 - f2 - f3 + f4 = kt P R / S`` (``S`` its load,
+    ``P`` front minus rear, ``R`` left minus right; corners front-left, front-right,
+    rear-left, rear-right). The twist is orthogonal to the load and the centre of
+    pressure of a rectangle, so the QP keeps it where no corner goes below 0 and clips
+    it where one would. ``forces`` is scratch. False when no prior changed."""
+    sx = _sum8(qp_x) if m == 8 else _sum_seq(qp_x, m)
+    if not sx > 0:
+        return False
+    f = F2 / sx
+    for k in range(8):
+        forces[k] = 0.0
+    for c in range(m):
+        forces[cidx[c]] = qp_x[c] * f
+    changed = False
+    for o in (0, 4):
+        if not (ctc[o] and ctc[o + 1] and ctc[o + 2] and ctc[o + 3]):
+            continue
+        f1, f2, f3, f4 = forces[o], forces[o + 1], forces[o + 2], forces[o + 3]
+        S = f1 + f2 + f3 + f4
+        if S > 0.0:
+            q = 0.25 * (kt * (f1 + f2 - f3 - f4) * (f1 - f2 + f3 - f4) / S)
+            prior8[o] += q
+            prior8[o + 1] -= q
+            prior8[o + 2] -= q
+            prior8[o + 3] += q
+            changed = True
+    return changed
 
 
 @njit_nort(inline="always")
@@ -1110,7 +1150,21 @@ def resolve_pending(y, state, cf, ci, ws, iws):
 
 
 #: The settings a twin may change without changing the front of the step.
-_TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT)
+_TWIN_FREE_PRM = (_P_USE_ACC, _P_ACC_VERT, _P_TWIST)
+
+
+def _check_twist_layout(points_F: np.ndarray) -> None:
+    """``VFSConfig.contact_twist`` needs the sole corners front-left, front-right,
+    rear-left, rear-right (the twist pattern of :func:`_twist_prior`)."""
+    from grfguard.errors import ConfigError
+
+    p = np.asarray(points_F, float)
+    if p.shape != (4, 2) or not (np.array_equal(np.sign(p[:, 0]), [1, 1, -1, -1])
+                                 and np.array_equal(np.sign(p[:, 1]), [1, -1, 1, -1])):
+        raise ConfigError(
+            "vfs.contact_twist needs four sensors per sole ordered front-left, front-right, "
+            f"rear-left, rear-right; this robot's sole sensors are at {p.tolist()} [m]; "
+            "set vfs.contact_twist = 0")
 
 
 def _filter_design(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1205,6 +1259,9 @@ class VFSKernel:
         prm[_P_QIT : _P_QIT + 4] = kin._q_IT
         prm[18:_P_ANCHOR_HOLD] = extra_params(cfg, vfs.points_F)
         prm[_P_ANCHOR_HOLD] = float(cfg.anchor_hold)
+        prm[_P_TWIST] = cfg.contact_twist
+        if cfg.contact_twist != 0.0:
+            _check_twist_layout(vfs.points_F)
         self.prm = prm
         #: Input row layout (:data:`IN_COLUMNS`; the paper's CoM filter also reads the
         #: force sensors and the planned ZMP: :data:`PAPER_IN_COLUMNS`).
