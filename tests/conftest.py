@@ -37,10 +37,10 @@ SMALL_ROBOT = RobotConfig(
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """Compile (fresh checkout: about four minutes of CPU, once) or load (about 1 s) the
-    numba kernels before any test: ``Monitor.for_log`` runs them by
-    default, and subprocesses, Dask workers or pytest-xdist workers would otherwise compile
-    them each, at the same time."""
+    """Compile (fresh checkout: about three minutes of CPU, once) or load (about 1 s) the
+    numba kernels before any test: ``Monitor.for_log`` runs them by default, and
+    subprocesses, Dask workers or pytest-xdist workers would otherwise compile them each,
+    at the same time."""
     if hasattr(session.config, "workerinput"):  # an xdist worker: the controller did it
         return
     from grfguard.kernels import warm_up

@@ -1,6 +1,6 @@
 """Compile (or load from the on-disk cache) every kernel before the first real sample.
 
-The first call in a fresh environment compiles every kernel: about four minutes of CPU
+The first call in a fresh environment compiles every kernel: about three minutes of CPU
 (numba, one core; BENCHMARKS "Compiled kernels"). After that the machine code is cached
 next to the modules and a new process loads it in one to three seconds.
 :func:`warm_up` does it up front, e.g. before a live monitor starts, so no sample pays
