@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
+import time
 from pathlib import Path
 
 from grfguard.model.robot import RobotConfig
@@ -34,6 +36,30 @@ def update_section(section: str, body: str, path: Path = BENCHMARKS_MD) -> None:
     else:
         text = text.rstrip("\n") + "\n\n" + block
     path.write_text(text.rstrip("\n") + "\n")
+
+
+class RunClock:
+    """Wall time, CPU time and load average from the start of a benchmark run."""
+
+    def __init__(self) -> None:
+        self.t0, self.c0, self.load0 = time.time(), time.process_time(), os.getloadavg()[0]
+
+    def line(self) -> str:
+        """The closing ``Runtime ...`` sentence of a section."""
+        return (f"Runtime {time.time() - self.t0:.0f} s wall, "
+                f"{time.process_time() - self.c0:.0f} s CPU (load average {self.load0:.1f} at "
+                f"the start, {os.getloadavg()[0]:.1f} at the end), measured "
+                f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.")
+
+
+def finish_section(section: str, lines: list[str], clock: RunClock, write: bool) -> str:
+    """``lines`` and the clock's ``Runtime`` sentence as one text: printed, and written
+    into ``section`` of BENCHMARKS.md when ``write``. Returns the text."""
+    text = "\n".join([*lines, "", clock.line(), ""])
+    print(text)
+    if write:
+        update_section(section, text)
+    return text
 
 
 def renamed_copy(src: Path, name: str, work: Path) -> None:

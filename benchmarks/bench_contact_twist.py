@@ -24,9 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +38,7 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import update_section  # noqa: E402
+from _common import RunClock, finish_section  # noqa: E402
 
 HEADER = "## Model self-calibration: contact twist"
 #: Gaits of the other walks of bench_selfcal.py: (step length [m], step period [s]).
@@ -93,7 +91,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
-    t0, c0, load0 = time.time(), time.process_time(), os.getloadavg()[0]
+    clock = RunClock()
     g = load_reality("all")
     lines = [HEADER, "", "`python benchmarks/bench_contact_twist.py --write`. (1) True twist "
              "`T = f1 - f2 - f3 + f4` of each stance sole (planned single support, every true "
@@ -157,13 +155,7 @@ def main() -> None:
               "on the 10 minutes of other walks of `bench_selfcal.py` (seeds 11-20, five "
               f"gaits): {sum(eps)} ({', '.join(map(str, eps))}); without the twist "
               "(corner 0.6113): 0 (section \"Model self-calibration\")."]
-    lines += ["", f"Runtime {time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s "
-              f"CPU (load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the "
-              f"end), measured {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.", ""]
-    text = "\n".join(lines)
-    print(text)
-    if args.write:
-        update_section(HEADER, text)
+    finish_section(HEADER, lines, clock, args.write)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import os
 import sys
 import time
 from pathlib import Path
@@ -47,7 +46,7 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import update_section  # noqa: E402
+from _common import RunClock, finish_section  # noqa: E402
 
 HEADER = "## Model self-calibration: phase lead on the rate low-pass"
 SENTINEL_HZ = 77.0
@@ -151,7 +150,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
-    t0, c0, load0 = time.time(), time.process_time(), os.getloadavg()[0]
+    clock = RunClock()
     exact = simulate(gait=GaitConfig(duration=60.0), seed=args.seed)
     th_x = calibrate_thresholds([exact])
     c_x = th_x.corner_sigma * th_x.corner_h
@@ -162,7 +161,7 @@ def main() -> None:
     log, cfg0 = apply_corrections(cal, corr), corrected_config(MonitorConfig(), corr)
     fs = 1.0 / float(np.median(np.diff(log["time"].to_numpy(float))))
     print(f"exact model corner threshold {c_x:.4f}; log rate {fs:g} Hz "
-          f"({time.time() - t0:.0f} s)", flush=True)
+          f"({time.time() - clock.t0:.0f} s)", flush=True)
     rows = []
     for d in DESIGNS:
         with rate_filter(d):
@@ -190,13 +189,7 @@ def main() -> None:
     ]
     lines += [f"| {lab} | {gd:.1f} | {pk:.3f} | {ov:.3f} | {c:.4f} | {h:.1f} | "
               f"{c / c_x:.3f} | {t:.4f} |" for lab, gd, pk, ov, c, h, t in rows]
-    lines += ["", f"Runtime {time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s "
-              f"CPU (load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the "
-              f"end), measured {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.", ""]
-    text = "\n".join(lines)
-    print(text)
-    if args.write and args.seed == 1:
-        update_section(HEADER, text)
+    finish_section(HEADER, lines, clock, args.write and args.seed == 1)
 
 
 if __name__ == "__main__":

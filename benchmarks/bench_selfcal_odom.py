@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import os
 import sys
 import time
 from pathlib import Path
@@ -60,7 +59,7 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import update_section  # noqa: E402
+from _common import RunClock, finish_section  # noqa: E402
 
 HEADER = "## Model self-calibration: smoothing the leg odometry"
 FS = 1000.0
@@ -329,7 +328,7 @@ def main() -> None:
                     help="only the ringing check: alarm episodes on MINUTES other walks "
                          "for the per-channel low-passes (printed, not written)")
     args = ap.parse_args()
-    t0, c0, load0 = time.time(), time.process_time(), os.getloadavg()[0]
+    clock = RunClock()
     exact = simulate(gait=GaitConfig(duration=60.0), seed=args.seed)
     th_x = calibrate_thresholds([exact])
     c_x = th_x.corner_sigma * th_x.corner_h
@@ -338,13 +337,12 @@ def main() -> None:
     m_true = RobotConfig().mass * (1 + cal.attrs["reality"]["mass_error"])
     corr = estimate_corrections(cal, measured_mass_kg=m_true)
     log, cfg0 = apply_corrections(cal, corr), corrected_config(MonitorConfig(), corr)
-    print(f"exact model corner threshold {c_x:.4f} ({time.time() - t0:.0f} s)", flush=True)
+    print(f"exact model corner threshold {c_x:.4f} ({time.time() - clock.t0:.0f} s)", flush=True)
     if args.other_walks:
         for lab, c, eps in other_walks(log, cfg0, corr, args.other_walks):
             print(f"{lab}: corner {c:.4f} ({c / c_x:.3f}x); alarm episodes {sum(eps)} "
                   f"({', '.join(map(str, eps))})")
-        print(f"Runtime {time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s CPU "
-              f"(load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end)")
+        print(clock.line())
         return
     rows = []
     for group, lab, lg, change, sub in cases(log):
@@ -376,13 +374,7 @@ def main() -> None:
               "|---|---|---|---|---|"]
     lines += [f"| {lab} | {a:.1f} | {b:.1f} | {c:.1f} | {d:.1f} |"
               for lab, a, b, c, d in hrows]
-    lines += ["", f"Runtime {time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s "
-              f"CPU (load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the "
-              f"end), measured {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.", ""]
-    text = "\n".join(lines)
-    print(text)
-    if args.write and args.seed == 1:
-        update_section(HEADER, text)
+    finish_section(HEADER, lines, clock, args.write and args.seed == 1)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,6 @@ BENCHMARKS.md.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -42,7 +41,7 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import update_section  # noqa: E402
+from _common import RunClock, finish_section  # noqa: E402
 
 HEADER = "## Model self-calibration: per-corner noise of the accelerometer-free sensor"
 #: (label, VFSConfig changes)
@@ -104,8 +103,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
-    t0, c0 = time.time(), time.process_time()
-    load0 = os.getloadavg()[0]
+    clock = RunClock()
     gap = load_reality("all")
     exact = simulate(gait=GaitConfig(duration=60.0), seed=1)
     th_exact = calibrate_thresholds([exact])
@@ -118,7 +116,7 @@ def main() -> None:
     corr = estimate_corrections(cal, measured_mass_kg=m_true)
     cases = {"robot": (apply_corrections(cal, corr), corrected_config(MonitorConfig(), corr)),
              "vib": (apply_corrections(vib, corr_v), corrected_config(MonitorConfig(), corr_v))}
-    print(f"exact model corner threshold {c_x:.3f} ({time.time() - t0:.0f} s)", flush=True)
+    print(f"exact model corner threshold {c_x:.3f} ({time.time() - clock.t0:.0f} s)", flush=True)
     rows = []
     for label, change in SETTINGS:
         vals = {}
@@ -151,13 +149,7 @@ def main() -> None:
     for k in orc["robot"]:
         lines.append(f"| {k} | {orc['robot'][k]:.3f} | {orc['robot'][k] / c_x:.2f} | "
                      f"{orc['vib'][k]:.3f} |")
-    lines += ["", f"Runtime {time.time() - t0:.0f} s wall, {time.process_time() - c0:.0f} s "
-              f"CPU (load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the "
-              f"end), measured {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.", ""]
-    text = "\n".join(lines)
-    print(text)
-    if args.write:
-        update_section(HEADER, text)
+    finish_section(HEADER, lines, clock, args.write)
 
 
 if __name__ == "__main__":
