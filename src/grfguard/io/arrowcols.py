@@ -8,13 +8,11 @@ as ``pa.array`` / ``Array.to_numpy`` give them), so it never imports pandas (iss
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["float_array", "bool_array", "number_array", "strings_from_codes",
-           "numpy_column"]
+__all__ = ["float_array", "bool_array", "number_array", "numpy_column"]
 
 #: numpy dtypes of the Arrow number types read as numpy views (:func:`numpy_column`).
 _NUMPY_OF = {"double": np.float64, "float": np.float32, "int64": np.int64,
@@ -58,37 +56,6 @@ def number_array(a: np.ndarray) -> Any:
     a = np.ascontiguousarray(a)
     return pa.Array.from_buffers(pa.from_numpy_dtype(a.dtype), a.size,
                                  [None, pa.py_buffer(a)])
-
-
-def strings_from_codes(codes: Any, names: Sequence[str]) -> Any:
-    """``names[codes]`` as an Arrow ``large_string`` array: the same array as
-    :func:`grfguard.io.codes.codes_to_arrow` (and its checks), built from buffers.
-
-    Raises:
-        ValueError, TypeError, IndexError: As :func:`~grfguard.io.codes.codes_to_arrow`.
-    """
-    import pyarrow as pa
-
-    from grfguard.io.codes import _index
-
-    idx = _index(codes, len(names))
-    n = idx.size
-    enc = [str(s).encode("utf-8") for s in names]
-    lens = np.array([len(e) for e in enc], dtype=np.int64)
-    if n and idx[0] == idx.min() == idx.max():  # one code (a kind that stays "none")
-        offsets = np.arange(n + 1, dtype=np.int64) * lens[idx[0]]
-        data = enc[int(idx[0])] * n
-    else:
-        starts = np.concatenate([[0], np.cumsum(lens)])
-        row_len = lens[idx]
-        offsets = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(row_len, out=offsets[1:])
-        total = int(offsets[-1])
-        blob = np.frombuffer(b"".join(enc) or b"\0", dtype=np.uint8)
-        src = np.repeat(starts[idx] - offsets[:-1], row_len) + np.arange(total)
-        data = blob[src].tobytes()
-    return pa.Array.from_buffers(pa.large_string(), n,
-                                 [None, pa.py_buffer(offsets), pa.py_buffer(data)])
 
 
 def numpy_column(col: Any) -> np.ndarray | None:

@@ -348,26 +348,18 @@ def _arrow(values: Any) -> Any:
     anything else converted by pyarrow as ``from_pandas`` converts it."""
     import pyarrow as pa
 
-    from grfguard.io.arrowcols import number_array
+    from grfguard.io.arrowcols import float_array, number_array
 
-    if isinstance(values, pa.Array):  # (built from codes: grfguard.io.arrowcols)
+    if isinstance(values, pa.Array):  # (built from codes: grfguard.io.codes.codes_to_arrow)
         return values
     dtype = getattr(values, "dtype", None)
     if isinstance(dtype, np.dtype) and dtype.kind in "biuf":
         a = np.asarray(values)
         if dtype == np.float64:
-            return _float_array(a)
+            return float_array(a)
         if dtype.kind in "biu":
             return number_array(a)
     return pa.array(values, from_pandas=True)
-
-
-def _float_array(a: np.ndarray) -> Any:
-    """float64 ``a`` as Arrow (no copy of the values), NaN as null
-    (:func:`grfguard.io.arrowcols.float_array`: no pandas import)."""
-    from grfguard.io.arrowcols import float_array
-
-    return float_array(a)
 
 
 class _Blocks:
@@ -399,7 +391,8 @@ class _Blocks:
         """Rows ``a:b``. The float columns are views of the reused block buffer, or
         with ``keep`` (``n_float`` rows of at least ``b - a`` columns) of copies into
         ``keep``'s rows (they then outlive the next block)."""
-        from grfguard.io.arrowcols import bool_array, strings_from_codes
+        from grfguard.io.arrowcols import bool_array, float_array
+        from grfguard.io.codes import codes_to_arrow
         from grfguard.io.columns import as_frame
 
         km, k = self.km, self.k
@@ -414,19 +407,19 @@ class _Blocks:
                 if keep is not None:
                     keep[i, :m] = Y[:, j]
                     i += 1
-                new[name] = _float_array(Y[:, j] if keep is None else keep[i - 1, :m])
+                new[name] = float_array(Y[:, j] if keep is None else keep[i - 1, :m])
             elif typ == "flag":
                 new[name] = bool_array(Y[:, j] != 0.0)
             elif typ == "kind":
-                new[name] = strings_from_codes(Y[:, j], km.KIND_NAMES)
+                new[name] = codes_to_arrow(Y[:, j], km.KIND_NAMES)
             elif typ == "mismatch_reason":
                 new[name] = km._mismatch_reasons(Y[:, j:], k.vib_config,
-                                                 to=strings_from_codes)
+                                                 to=codes_to_arrow)
             elif typ == "state":
-                new[name] = strings_from_codes(Y[:, j], km.SYSTEM_STATES)
+                new[name] = codes_to_arrow(Y[:, j], km.SYSTEM_STATES)
             else:  # "reason" (a row with its own text: the input guard's, on a frame)
                 part = as_frame(self.log.iloc[a:b]) if (EX[:, 0] != 0.0).any() else None
                 new[name] = _arrow(km._reasons(self.mon, part, Y[:, j].astype(np.int64),
-                                               self.src[0][a:b], EX, to=strings_from_codes))
+                                               self.src[0][a:b], EX, to=codes_to_arrow))
         return {c: (new[c] if c in new else self.keep[c].slice(a, m)) for c in self.order
                 if c not in self.raw}
