@@ -74,3 +74,39 @@ def test_no_mujoco_import_with_a_cached_summary() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=600)
     assert out.stdout.strip() == "False"
+
+
+def test_cache_evicts_the_least_recently_used(tmp_path) -> None:
+    """Beyond the limit the oldest files go (never the one just stored), a file read is
+    the newest again, and stale temporary files of interrupted stores are removed."""
+    import os
+
+    files = [tmp_path / f"kintree-{i:02d}.npz" for i in range(8)]
+    for i, p in enumerate(files):
+        p.write_bytes(b"x")
+        os.utime(p, ns=(10**18 + i * 10**9, 10**18 + i * 10**9))
+    other = tmp_path / "unrelated.npz"
+    other.write_bytes(b"x")
+    os.utime(files[1], ns=(1, 1))  # oldest of all, but it is the one kept
+    stale = tmp_path / "kintree-99.npz.123.tmp"
+    stale.write_bytes(b"x")
+    os.utime(stale, ns=(1, 1))
+    fresh = tmp_path / "kintree-98.npz.124.tmp"
+    fresh.write_bytes(b"x")
+    removed = kinmod._evict(tmp_path, keep=files[1], limit=5)
+    # 7 other files + the kept one: 3 go, the oldest (0, 2, 3)
+    assert sorted(p.name for p in removed) == sorted(
+        [files[0].name, files[2].name, files[3].name, stale.name])
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == sorted([*(f.name for f in files[4:]), files[1].name, other.name,
+                           fresh.name])
+    # a summary read is marked used: stored now, it outlives files written before it
+    robot = RobotConfig(name="cache-lru", mass=66.0)
+    want = kinmod._summary_of(build_model(robot))
+    path = tmp_path / "kintree-read.npz"
+    np.savez(path, **want)
+    os.utime(path, ns=(1, 1))
+    _same(kinmod._load_summary(path), want)
+    assert path.stat().st_mtime_ns > files[-1].stat().st_mtime_ns
+    kinmod._store_summary(tmp_path / "kintree-new.npz", want)  # limit 64: nothing goes
+    assert path.exists() and (tmp_path / "kintree-new.npz").exists()

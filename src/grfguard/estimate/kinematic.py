@@ -15,6 +15,7 @@ sphere) in A [m]; ``R_WB`` body rotations (A and W share their orientation).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 from dataclasses import dataclass, fields
@@ -38,6 +39,12 @@ _CACHE_VERSION = "1"
 #: The :class:`KinematicModel` attributes read from the MuJoCo model (and cached).
 _KIN_FIELDS = ("trunk_id", "root_qadr", "joint_qadr", "imu_site", "_q_IT", "corner_sites",
                "sole_sites", "corner_radius", "body_ids", "body_mass", "body_inertia")
+#: Files kept in the disk cache (about 16 kB each): storing one more removes the least
+#: recently used beyond this (a campaign over many robot variants must not grow it
+#: without bound).
+_CACHE_FILES = 64
+#: A temporary file of an interrupted store older than this is removed [s].
+_STALE_TMP_S = 600.0
 #: In-process memo of the cached summaries (key: the cache key).
 _SUMMARIES: dict[str, dict[str, np.ndarray]] = {}
 
@@ -279,7 +286,11 @@ def _load_summary(path: Path) -> dict[str, np.ndarray] | None:
             out = {name: z[name] for name in z.files}
     except (OSError, ValueError, KeyError, EOFError):
         return None
-    return out if set(out) == want else None
+    if set(out) != want:
+        return None
+    with contextlib.suppress(OSError):  # used now: the last to be evicted
+        os.utime(path)
+    return out
 
 
 def _store_summary(path: Path, summary: dict[str, np.ndarray]) -> None:
@@ -292,3 +303,32 @@ def _store_summary(path: Path, summary: dict[str, np.ndarray]) -> None:
         os.replace(tmp, path)
     except OSError:
         tmp.unlink(missing_ok=True)
+        return
+    _evict(path.parent, keep=path)
+
+
+def _evict(directory: Path, keep: Path, limit: int = _CACHE_FILES) -> list[Path]:
+    """Remove the least recently used ``kintree-*.npz`` files of ``directory`` beyond
+    ``limit`` (never ``keep``) and temporary files of interrupted stores older than
+    :data:`_STALE_TMP_S`; returns the files removed (best effort: a file another process
+    removes or uses meanwhile is left to it)."""
+    import time
+
+    removed: list[Path] = []
+    try:
+        entries = []
+        for p in directory.glob("kintree-*"):
+            st = p.stat()
+            entries.append((st.st_mtime_ns, p))
+    except OSError:
+        return removed
+    now = time.time()
+    done = [p for t, p in entries if p.name.endswith(".tmp") and now - t / 1e9 > _STALE_TMP_S]
+    files = sorted((e for e in entries if e[1].suffix == ".npz" and e[1] != keep),
+                   key=lambda e: e[0])
+    done += [p for _, p in files[:max(0, len(files) + 1 - limit)]]
+    for p in done:
+        with contextlib.suppress(OSError):
+            p.unlink()
+            removed.append(p)
+    return removed
