@@ -244,15 +244,19 @@ def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dic
 
     from grfguard.io.logio import parquet_options
     from grfguard.io.safe import atomic_path
-    from grfguard.io.splice import Splicer
+    from grfguard.io.splice import Splicer, start_writeback
 
     raw = [c for c in blocks.order if c in blocks.raw]
+    blocks.dictionary_text = True  # stored as dictionary pages, typed large_string below
     with atomic_path(Path(path), what="log") as tmp, open(tmp, "wb", buffering=0) as fh:
         sp = Splicer(fh, footer)
         writer = schema = None
         try:
             a = 0
             for g, m in enumerate(footer.rows_per_group()):
+                # the group's copied chunks first: the disk writes them while the
+                # monitor runs (see Splicer.copy_group), not while the output is synced
+                sp.copy_group(g, raw)
                 keep = np.empty((blocks.n_float, m))  # the group's float columns, held
                 parts = [blocks.block(s, min(a + m, s + rows), keep=keep[:, s - a:])
                          for s in range(a, a + m, rows)]
@@ -265,8 +269,9 @@ def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dic
                     [pa.chunked_array([p[c] for p in parts], f.type)
                      for c, f in zip(schema.names, schema, strict=True)], schema=schema)
                 del parts
-                sp.copy_group(g, raw)
+                written = sp.pos
                 writer.write_table(table, row_group_size=m)
+                start_writeback(fh, written)
                 del table
                 a += m
             sp.sink.hold()
@@ -277,7 +282,8 @@ def _write_spliced(blocks: _Blocks, footer: Any, path: str | Path, metadata: dic
                 sp.sink.hold()
                 with contextlib.suppress(Exception):
                     writer.close()
-        types = {**types, **{f.name: f.type for f in schema}}
+        types = {**types, **{f.name: (f.type.value_type if pa.types.is_dictionary(f.type)
+                                      else f.type) for f in schema}}
         try:
             sp.finish(_template(blocks.order, types, metadata), blocks.order)
         except ValueError as exc:
@@ -386,16 +392,20 @@ class _Blocks:
         self.Y = np.empty((len(k.out_cols), rows))  # each output column contiguous
         self.n_float = sum(typ == "float" for _, typ, _ in km.output_rows(k))
         self.EX = np.empty((rows, km.N_EX))
+        #: Fault kinds and system states as Arrow dictionary arrays over the fixed names
+        #: (for a writer that stores ``large_string`` as their type: :func:`_write_spliced`)
+        self.dictionary_text = False
 
     def block(self, a: int, b: int, keep: np.ndarray | None = None) -> dict[str, Any]:
         """Rows ``a:b``. The float columns are views of the reused block buffer, or
         with ``keep`` (``n_float`` rows of at least ``b - a`` columns) of copies into
         ``keep``'s rows (they then outlive the next block)."""
         from grfguard.io.arrowcols import bool_array, float_array
-        from grfguard.io.codes import codes_to_arrow
+        from grfguard.io.codes import codes_to_arrow, codes_to_dictionary
         from grfguard.io.columns import as_frame
 
         km, k = self.km, self.k
+        text = codes_to_dictionary if self.dictionary_text else codes_to_arrow
         m = b - a
         Y = self.Y[:, :m].T  # rows x columns, each column contiguous
         EX = self.EX[:m]
@@ -411,12 +421,12 @@ class _Blocks:
             elif typ == "flag":
                 new[name] = bool_array(Y[:, j] != 0.0)
             elif typ == "kind":
-                new[name] = codes_to_arrow(Y[:, j], km.KIND_NAMES)
+                new[name] = text(Y[:, j], km.KIND_NAMES)
             elif typ == "mismatch_reason":
                 new[name] = km._mismatch_reasons(Y[:, j:], k.vib_config,
                                                  to=codes_to_arrow)
             elif typ == "state":
-                new[name] = codes_to_arrow(Y[:, j], km.SYSTEM_STATES)
+                new[name] = text(Y[:, j], km.SYSTEM_STATES)
             else:  # "reason" (a row with its own text: the input guard's, on a frame)
                 part = as_frame(self.log.iloc[a:b]) if (EX[:, 0] != 0.0).any() else None
                 new[name] = _arrow(km._reasons(self.mon, part, Y[:, j].astype(np.int64),
