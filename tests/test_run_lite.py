@@ -19,7 +19,7 @@ from grfguard.io.arrowcols import (
     number_array,
     numpy_column,
 )
-from grfguard.io.codes import codes_to_arrow
+from grfguard.io.codes import codes_to_arrow, codes_to_dictionary
 from grfguard.io.columns import LogColumns, as_frame
 from grfguard.io.logio import read_log, write_log
 
@@ -81,6 +81,12 @@ def test_arrow_arrays_from_buffers_equal_pa_array() -> None:
         s = codes_to_arrow(codes.astype(float), names)
         s.validate(full=True)
         assert s.equals(pa.array([names[int(c)] for c in codes], type=pa.large_string()))
+        d = codes_to_dictionary(codes.astype(float), names)
+        d.validate(full=True)
+        assert d.dictionary_decode().equals(s) and d.dictionary.equals(
+            pa.array(names, type=pa.large_string()))
+    with pytest.raises(IndexError):
+        codes_to_dictionary(np.array([4]), names)
     with pytest.raises(IndexError):
         codes_to_arrow(np.array([4]), names)
     with pytest.raises(ValueError):

@@ -90,10 +90,16 @@ def test_run_copies_the_unchanged_columns(walk, tmp_path, monkeypatch) -> None:
     column with NaN (written as null by the frame path) and the monitor's are encoded;
     the file reads back as the frame path's."""
     path, log = walk
-    copied, _ = _spliced_equals_frame_path(path, tmp_path, monkeypatch)
+    copied, out = _spliced_equals_frame_path(path, tmp_path, monkeypatch)
     assert "force_l2" not in copied  # NaN -> encoded (null) as the frame path does
     assert {"time", "force_r1", "true_force_r1", "imu_quat_w"} <= set(copied)
     assert len(copied) == len(log.columns) - 1
+    # fault kinds and system states go in as dictionary pages (one dictionary of the
+    # fixed names), read back as the frame path's large_string columns (above)
+    meta = pq.ParquetFile(out).metadata.row_group(0)
+    enc = {meta.column(i).path_in_schema: meta.column(i).encodings
+           for i in range(meta.num_columns)}
+    assert all("RLE_DICTIONARY" in enc[c] for c in ("kind_r1", "kind_l4", "system_state"))
 
 
 def test_run_copies_from_any_layout(walk, tmp_path, monkeypatch) -> None:

@@ -25,7 +25,8 @@ import numpy as np
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["codes_to_str", "codes_to_categorical", "strings_to_str", "codes_to_arrow"]
+__all__ = ["codes_to_str", "codes_to_categorical", "strings_to_str", "codes_to_arrow",
+           "codes_to_dictionary"]
 
 
 def _index(codes: Any, n_names: int) -> np.ndarray:
@@ -66,6 +67,25 @@ def codes_to_arrow(codes: Any, names: Sequence[str]) -> Any:
     """``names[codes]`` as an Arrow ``large_string`` array (the type pandas' ``str``
     columns are written with), without pandas; codes as in :func:`codes_to_str`."""
     return _take(_index(codes, len(names)), names)
+
+
+def codes_to_dictionary(codes: Any, names: tuple[str, ...]) -> Any:
+    """``names[codes]`` as an Arrow dictionary array (int32 indices into ``names`` as
+    ``large_string``), without pandas; codes as in :func:`codes_to_str`. A Parquet writer
+    stores it as dictionary pages without looking at a string per row; read back under
+    a ``large_string`` schema it is the column :func:`codes_to_arrow` gives."""
+    import pyarrow as pa
+
+    idx = _index(codes, len(names)).astype(np.int32)
+    indices = pa.Array.from_buffers(pa.int32(), idx.size, [None, pa.py_buffer(idx)])
+    return pa.DictionaryArray.from_arrays(indices, _names_array(names))
+
+
+@functools.lru_cache(maxsize=16)
+def _names_array(names: tuple[str, ...]) -> Any:
+    """``names`` as one Arrow ``large_string`` array, shared by every column and block
+    built from them (one dictionary for a whole Parquet column chunk)."""
+    return _take(np.arange(len(names), dtype=np.int64), names)
 
 
 def _take(idx: np.ndarray, names: Sequence[str]) -> Any:
