@@ -584,9 +584,29 @@ def calibrate(
 
         frames, corr_toml, config = fit_model_corrections(frames, mass, console, config,
                                                           false_alarm_rate)
-    th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config)
+    summary: dict = {}
+    th = calibrate_thresholds(frames, false_alarm_rate_per_hour=false_alarm_rate, config=config,
+                              summary=summary)
     atomic_write_text(output, th.to_toml() + corr_toml, what="thresholds TOML")
     _say(f"wrote {output} from {len(frames)} log(s)")
+    if not model:
+        _tilt_hint(frames[0], rob, summary)
+
+
+def _tilt_hint(log: Any, rob: Any, summary: dict) -> None:
+    """Say so when the per-corner residuals carry a steady centre-of-pressure shift that
+    ``calibrate --model`` would fit (:func:`grfguard.detect.calibrate.corner_tilt`)."""
+    from grfguard._cliutil import _robot_of_log
+    from grfguard.detect.calibrate import corner_tilt
+
+    robot = rob if rob is not None else _robot_of_log(log)
+    if "corner_median" not in summary or not hasattr(robot, "sensor_positions_in_foot"):
+        return
+    tilt = corner_tilt(summary["corner_median"], summary["corner_sigma"],
+                       robot.sensor_positions_in_foot())
+    text = tilt.hint()
+    if text is not None:
+        _say(f"hint: {text}")
 
 
 #: Least fault-free walking `grfguard calibrate` accepts [s] (a few steps).

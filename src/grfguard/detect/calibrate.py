@@ -10,7 +10,7 @@ thresholds and ``diagnostics=True`` (it never flags, so recovery plays no part).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +28,7 @@ from grfguard.model.robot import SENSOR_NAMES, SIDES
 
 pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
-__all__ = ["calibrate_thresholds"]
+__all__ = ["calibrate_thresholds", "CornerTilt", "corner_tilt"]
 
 _N = len(SENSOR_NAMES)
 
@@ -89,6 +89,7 @@ def calibrate_thresholds(
     config: MonitorConfig | str | Path | None = None,
     safety: float = 1.5,
     min_h: float = 30.0,
+    summary: dict | None = None,
 ) -> Thresholds:
     """Calibrate every threshold from fault-free logs for a stated false-alarm rate.
 
@@ -106,6 +107,9 @@ def calibrate_thresholds(
         safety: Factor on the largest fault-free statistic.
         min_h: Lower bound of every CUSUM threshold [σ·samples] (a margin for walks
             unlike the calibration ones).
+        summary: When given, filled with ``corner_median`` (each corner residual's median
+            over its valid phase, ``SENSOR_NAMES`` order [fraction of the weight]) and
+            ``corner_sigma``: the input of :func:`corner_tilt`.
 
     Returns:
         New :class:`Thresholds`.
@@ -140,6 +144,13 @@ def calibrate_thresholds(
     sigma_sw = _scale(runs, "res_swing_", SENSOR_NAMES, base.sigma_swing_n)
     sigma_t = _scale(runs, "res_total_", SIDES, base.total_sigma)
     sigma_c = _scale(runs, "res_corner_", SENSOR_NAMES, base.corner_sigma)
+    if summary is not None:
+        res = [np.concatenate([run[f"res_corner_{s}"].to_numpy(float) for run in runs])
+               for s in SENSOR_NAMES]
+        summary["corner_median"] = np.array(
+            [float(np.median(r[np.isfinite(r)])) if np.isfinite(r).any() else 0.0
+             for r in res])
+        summary["corner_sigma"] = sigma_c
     p_sw = _peaks(runs, "res_swing_", SENSOR_NAMES, sigma_sw, base.swing_kappa)
     p_t = _peaks(runs, "res_total_", SIDES, sigma_t, base.total_kappa)
     p_c = _peaks(runs, "res_corner_", SENSOR_NAMES, sigma_c, base.corner_kappa)
@@ -158,3 +169,70 @@ def calibrate_thresholds(
         false_alarm_rate_per_hour=float(false_alarm_rate_per_hour),
         source=f"calibrated on {len(logs)} fault-free log(s), {hours * 60:.1f} min",
     )
+
+
+@dataclass(frozen=True)
+class CornerTilt:
+    """The steady part of the per-corner residuals that a shifted centre of pressure
+    explains (:func:`corner_tilt`).
+
+    Attributes:
+        cop_shift_m: Measured minus estimated centre of pressure of a stance sole, sole
+            frame (forward, left) [m], the two soles averaged.
+        share: RMS of the residual medians that shift explains, as a fraction of the
+            per-corner noise scale.
+    """
+
+    cop_shift_m: tuple[float, float]
+    share: float
+
+    #: ``share`` from which :func:`corner_tilt`'s pattern is worth fitting: on the exact
+    #: model, IMU attitude errors of 1-4 mrad give 0.56-0.67 (and self-calibration then
+    #: lowers the per-corner threshold by 8-49 %), 1 mrad or less 0.27-0.28 (no gain), a
+    #: corrected walk 0.15 or less (``benchmarks/bench_attitude_bias.py``).
+    WORTH_FITTING = 0.4
+
+    def hint(self) -> str | None:
+        """A sentence for ``grfguard calibrate`` when the pattern is worth fitting."""
+        if self.share < self.WORTH_FITTING:
+            return None
+        dx, dy = (1000 * v for v in self.cop_shift_m)
+        where = " and ".join(
+            f"{abs(v):.1f} mm {word[v < 0]}" for v, word in
+            ((dx, ("forward", "back")), (dy, ("to the left", "to the right"))) if abs(v) >= 0.05)
+        return (f"the load cells put each stance sole's centre of pressure {where} of "
+                f"where the model does, all along the logs: a steady pattern worth "
+                f"{self.share:.0%} of the per-corner noise scale, which it inflates. An IMU "
+                "attitude error or a trunk CoM offset does this; `grfguard calibrate "
+                "--model` fits both and lowers the per-corner threshold")
+
+
+def corner_tilt(corner_median: np.ndarray, corner_sigma: float,
+                sensor_xy: np.ndarray) -> CornerTilt:
+    """The centre-of-pressure shift that best explains the per-corner residual medians.
+
+    In single support a stance sole carries about the whole weight, so a measured minus
+    estimated CoP shift ``d`` gives corner ``i`` (sole frame position ``p_i``) a
+    residual of about ``a_i d`` [fraction of the weight] with ``a_i`` the corner's
+    share of a moment, the same for both soles (a constant IMU attitude error or trunk
+    CoM offset moves both feet's CoP alike). ``d`` is the least-squares fit over the
+    eight medians.
+
+    Args:
+        corner_median: Residual medians of ``r1..r4, l1..l4`` [fraction of the weight]
+            (``calibrate_thresholds(summary=...)``).
+        corner_sigma: The per-corner noise scale [fraction of the weight].
+        sensor_xy: (4, 2) sensor positions in the sole frame [m]
+            (``RobotConfig.sensor_positions_in_foot``).
+    """
+    med = np.asarray(corner_median, float).reshape(2, 4)
+    p = np.asarray(sensor_xy, float)
+    c = p - p.mean(axis=0)
+    # force pattern of a CoP shift d for a fixed load: minimum-norm corner loads with
+    # sum f = 0 and sum f c = d, i.e. f = c (c^T c)^-1 d
+    A = c @ np.linalg.inv(c.T @ c)  # (4, 2): residual per corner = A d
+    A2 = np.vstack([A, A])
+    d, *_ = np.linalg.lstsq(A2, med.ravel(), rcond=None)
+    fit = A2 @ d
+    share = float(np.sqrt(np.mean(fit ** 2)) / corner_sigma) if corner_sigma > 0 else 0.0
+    return CornerTilt(cop_shift_m=(float(d[0]), float(d[1])), share=share)
