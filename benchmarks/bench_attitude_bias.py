@@ -15,9 +15,11 @@ Per seed, on the exact model's 60 s default walk (default monitor config):
 
 * the attitude bias of the logged quaternion against the true trunk orientation (roll,
   pitch) [mrad] (truth columns: the benchmark reads them, the monitor does not);
-* the per-corner residuals' medians over single support: the worst, and the roll and
-  pitch patterns ``(r1 - r2 + r3 - r4 + l1 - l2 + l3 - l4) / 8`` and ``(r1 + r2 - r3 -
-  r4 + l1 + l2 - l3 - l4) / 8`` [fraction of the weight];
+* the per-corner residuals' medians over single support (``calibrate_thresholds``'
+  ``summary``): the worst, and the roll and pitch patterns ``(r1 - r2 + r3 - r4 + l1 - l2 + l3 - l4) / 8`` and ``(r1 + r2 - r3 -
+  r4 + l1 + l2 - l3 - l4) / 8`` [fraction of the weight], and the share of the corner
+  noise scale that a steady CoP shift explains (``corner_tilt``, what ``grfguard
+  calibrate`` reports);
 * the per-corner threshold ``sigma * h`` calibrated on the walk (``calibrate_thresholds``,
   as in ``bench_selfcal.py``), and its noise scale ``sigma``;
 * the same after ``estimate_corrections`` on the same walk (``grfguard calibrate
@@ -39,8 +41,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from grfguard.calib import apply_corrections, corrected_config, estimate_corrections
-from grfguard.detect import Monitor, MonitorConfig, calibrate_thresholds
-from grfguard.model.robot import SENSOR_NAMES
+from grfguard.detect import MonitorConfig, calibrate_thresholds
+from grfguard.detect.calibrate import corner_tilt
+from grfguard.model.robot import SURALP
 from grfguard.sim import simulate
 from grfguard.sim.config import GaitConfig
 
@@ -79,14 +82,15 @@ def attitude_bias_mrad(log) -> tuple[float, float]:
 
 
 def corner_figures(log, cfg: MonitorConfig) -> dict[str, float]:
-    """Per-corner medians (worst, roll and pitch patterns) and the calibrated
-    threshold of ``log`` under ``cfg``."""
-    out = Monitor.for_log(log, config=cfg.replace(diagnostics=True)).run(log)
-    med = np.array([np.nanmedian(out[f"res_corner_{s}"].to_numpy(float))
-                    for s in SENSOR_NAMES])
-    th = calibrate_thresholds([log], config=cfg)
+    """Per-corner medians (worst, roll and pitch patterns), the share of the corner noise
+    scale that a CoP shift explains (``corner_tilt``: what ``grfguard calibrate`` reports)
+    and the calibrated threshold of ``log`` under ``cfg``."""
+    summary: dict = {}
+    th = calibrate_thresholds([log], config=cfg, summary=summary)
+    med = summary["corner_median"]
+    tilt = corner_tilt(med, summary["corner_sigma"], SURALP.sensor_positions_in_foot())
     return {"worst": float(np.max(np.abs(med))), "roll": float(ROLL @ med),
-            "pitch": float(PITCH @ med), "sigma": th.corner_sigma,
+            "pitch": float(PITCH @ med), "share": tilt.share, "sigma": th.corner_sigma,
             "h": th.corner_h, "level": th.corner_sigma * th.corner_h}
 
 
@@ -108,14 +112,18 @@ def main() -> None:
         "IMU's constant attitude error (`NoiseConfig.attitude_bias_sigma`, 2 mrad per "
         "axis) as roll / pitch [mrad]; the per-corner residuals' medians over single "
         "support [fraction of the weight]: the worst, the roll pattern (left corners "
-        "against right) and the pitch pattern (front against rear); the per-corner "
+        "against right) and the pitch pattern (front against rear); the share of the "
+        "per-corner noise scale that a steady centre-of-pressure shift explains "
+        "(`grfguard.detect.calibrate.corner_tilt`: `grfguard calibrate` hints at "
+        "`--model` from 0.4); the per-corner "
         "threshold `sigma * h` calibrated on the walk (`h` at its floor of 30 unless "
         "stated). Then the same after `estimate_corrections` on that walk (`grfguard "
         "calibrate --model`: the IMU mounting it fits takes the attitude error with it), "
         "thresholds calibrated on the corrected walk.", "",
-        "| seed | attitude bias roll / pitch | medians worst / roll / pitch | sigma | "
-        "threshold | corrected: medians worst / roll / pitch | sigma | threshold |",
-        "|---|---|---|---|---|---|---|---|"]
+        "| seed | attitude bias roll / pitch | medians worst / roll / pitch | CoP-shift "
+        "share | sigma | threshold | corrected: medians worst / roll / pitch | CoP-shift "
+        "share | sigma | threshold |",
+        "|---|---|---|---|---|---|---|---|---|---|"]
     for seed in args.seeds:
         log = simulate(gait=GaitConfig(duration=60.0), seed=seed)
         roll, pitch = attitude_bias_mrad(log)
@@ -127,7 +135,7 @@ def main() -> None:
         def cells(f: dict[str, float]) -> str:
             lv = f"{f['level']:.3f}" + ("" if f["h"] == 30.0 else f" (`h` {f['h']:.1f})")
             return (f"{f['worst']:.4f} / {f['roll']:+.4f} / {f['pitch']:+.4f} | "
-                    f"{f['sigma']:.4f} | {lv}")
+                    f"{f['share']:.2f} | {f['sigma']:.4f} | {lv}")
 
         lines.append(f"| {seed} | {roll:+.2f} / {pitch:+.2f} | {cells(raw)} | {cells(cal)} |")
         print(lines[-1], flush=True)
