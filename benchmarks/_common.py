@@ -20,6 +20,21 @@ SMALL = RobotConfig(
 )
 
 
+def reference_us(repeat: int = 5) -> float:
+    """A plain reference timed in the same run as a benchmark: ``np.sort`` of 10^6
+    random floats, best of ``repeat`` [µs]. A figure divided by it holds on a machine
+    whose speed varies (another load, the host's clock)."""
+    import numpy as np
+
+    x = np.random.default_rng(0).random(1_000_000)
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        np.sort(x)
+        best = min(best, time.perf_counter() - t0)
+    return best * 1e6
+
+
 def update_section(section: str, body: str, path: Path = BENCHMARKS_MD) -> None:
     """Replace (or append) only ``section`` (a ``## ...`` heading) of ``path``.
 

@@ -29,21 +29,16 @@ import time
 from importlib import resources
 from typing import Any
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import reference_us  # noqa: E402
+
 SLICE = 2_000
-
-
-def _reference_us() -> float:
-    """A plain reference: ``np.sort`` of 10^6 random floats, best of 5 [µs]."""
-    x = np.random.default_rng(0).random(1_000_000)
-    best = float("inf")
-    for _ in range(5):
-        t0 = time.perf_counter()
-        np.sort(x)
-        best = min(best, time.perf_counter() - t0)
-    return best * 1e6
 
 
 def _min_slices(fn: Any, n: int, reps: int) -> float:
@@ -160,7 +155,7 @@ def main() -> None:
     walk = simulate(SURALP, GaitConfig(duration=60.0), NoiseConfig(), seed=0)
     raw = inject_faults(walk, ["r1=frozen:0@5", "r2=offset:100@5", "r3=drift:15@5",
                                "r4=offset:-100@5"], seed=0)
-    ref = _reference_us()
+    ref = reference_us()
     s = suralp_stages(raw)
     t = talos_stages()
     print(f"reference np.sort(1e6): {ref:.0f} µs")

@@ -23,6 +23,10 @@ once with ``grfguard simulate`` (or ``--log`` is used), then:
   (:func:`grfguard.io.logio.parquet_options`: byte-stream-split floats, plain text, zstd
   level -1, statistics of ``time`` only), plus LZ4 and snappy.
 
+Between the runs, a plain reference is timed in a fresh process on the same core
+(``_common.reference_us``: ``np.sort`` of 10^6 floats): this machine's speed varies by
+half from one hour to the next, and the command's time in references does not.
+
 CPU times are the fair figure on a shared machine; the wall time is what a user waits
 on an otherwise idle core. Prints markdown and rewrites the section
 ``## grfguard run end to end (issue 11)`` of BENCHMARKS.md unless ``--no-write``.
@@ -49,7 +53,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import update_section
+from _common import BENCHMARKS_MD, reference_us, update_section
 
 SECTION = "## grfguard run end to end (issue 11)"
 #: The runs' environment: Python may write the bytecode of grfguard's own modules (as a
@@ -209,6 +213,15 @@ def _budget(n: int, ph: dict[str, float]) -> str:
                    f"reach {n / (3.0 - rest) / 1e3:.0f} k samples/s (CPU time).")
 
 
+def _reference(prefix: list[str]) -> float:
+    """:func:`_common.reference_us` in a fresh process on the command's core [µs]."""
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); from _common import reference_us;"
+            " print(reference_us())")
+    res = subprocess.run([*prefix, sys.executable, "-c", code, str(Path(__file__).parent)],
+                         capture_output=True, text=True, check=True)
+    return float(res.stdout.strip().splitlines()[-1])
+
+
 def _load() -> str:
     try:
         return f", load average {os.getloadavg()[0]:.1f}"
@@ -238,7 +251,11 @@ def main() -> None:
                            capture_output=True)
         out = Path(tmp) / "out.parquet"
         _command(log, out, prefix)  # warm the numba cache and the page cache
-        cmds = [_command(log, out, prefix) for _ in range(args.repeat)]
+        cmds, refs = [], []
+        for _ in range(args.repeat):  # the reference between the runs, on the same core
+            refs.append(_reference(prefix))
+            cmds.append(_command(log, out, prefix))
+        refs.append(_reference(prefix))
         best = min(cmds, key=lambda r: r["wall"])
         phases = [_phases(log, out, prefix) for _ in range(args.repeat)]
         ph = {k: min(p[k] for p in phases) for k in phases[0]}
@@ -263,7 +280,14 @@ def main() -> None:
         "",
         f"`{' '.join(prefix + ['grfguard', 'run', 'walk.parquet', '-o', 'out.parquet'])}`: "
         f"**{best['wall']:.2f} s wall** (best of {args.repeat}), {best['cpu']:.2f} s CPU, "
-        f"peak memory {best['rss_mb']:.0f} MB.",
+        f"peak memory {best['rss_mb']:.0f} MB. The runs: "
+        + ", ".join(f"{c['wall']:.2f}" for c in cmds) + " s wall. The reference timed "
+        f"between them on the same core (`np.sort` of 10^6 floats, best of 5 in a fresh "
+        f"process; `_common.reference_us`): {min(refs) / 1e3:.1f} ms at best, "
+        f"{max(refs) / 1e3:.1f} ms at worst, so the best run is "
+        f"{best['wall'] / (min(refs) * 1e-6):.0f} references (a machine that sorts in "
+        f"{3.0 / (best['wall'] / (min(refs) * 1e-6)) * 1e3:.1f} ms or less runs the "
+        "command under 3 s).",
         "",
         "| phase (fresh process, best of the runs) | CPU [s] |",
         "|---|---:|",
@@ -289,7 +313,24 @@ def main() -> None:
     text = "\n".join(lines) + "\n"
     print(text)
     if not args.no_write:
-        update_section(SECTION, text)
+        update_section(SECTION, text + _history())
+
+
+#: The line of the section after which earlier runs are kept by ``--write``.
+HISTORY = "Earlier runs (kept by `bench_run_cli.py --write`, which replaces only the text above):"
+
+
+def _history() -> str:
+    """The section's earlier runs (from :data:`HISTORY` on), this run's text above them
+    once written; "" when the section has none."""
+    text = BENCHMARKS_MD.read_text() if BENCHMARKS_MD.exists() else ""
+    start = text.find(SECTION + "\n")
+    if start < 0:
+        return ""
+    end = text.find("\n## ", start + len(SECTION))
+    body = text[start:end if end >= 0 else len(text)]
+    at = body.find(HISTORY)
+    return "" if at < 0 else "\n" + body[at:].rstrip("\n") + "\n"
 
 
 if __name__ == "__main__":
