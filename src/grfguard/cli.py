@@ -594,17 +594,16 @@ def calibrate(
 
 
 def _tilt_hint(log: Any, rob: Any, summary: dict) -> None:
-    """Say so when the per-corner residuals carry a steady centre-of-pressure shift that
-    ``calibrate --model`` would fit (:func:`grfguard.detect.calibrate.corner_tilt`)."""
+    """Say so when the per-corner residuals carry a steady centre-of-pressure shift
+    (:func:`grfguard.detect.calibrate.tilt_hint`: common to the logs, ``calibrate
+    --model`` fits it; changing from log to log, it does not)."""
     from grfguard._cliutil import _robot_of_log
-    from grfguard.detect.calibrate import corner_tilt
+    from grfguard.detect.calibrate import tilt_hint
 
     robot = rob if rob is not None else _robot_of_log(log)
     if "corner_median" not in summary or not hasattr(robot, "sensor_positions_in_foot"):
         return
-    tilt = corner_tilt(summary["corner_median"], summary["corner_sigma"],
-                       robot.sensor_positions_in_foot())
-    text = tilt.hint()
+    text = tilt_hint(summary, robot.sensor_positions_in_foot())
     if text is not None:
         _say(f"hint: {text}")
 

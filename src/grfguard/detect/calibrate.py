@@ -28,7 +28,7 @@ from grfguard.model.robot import SENSOR_NAMES, SIDES
 
 pd = lazy_module("pandas")  # (imported on first use: `grfguard run` never does)
 
-__all__ = ["calibrate_thresholds", "CornerTilt", "corner_tilt"]
+__all__ = ["calibrate_thresholds", "CornerTilt", "corner_tilt", "tilt_hint"]
 
 _N = len(SENSOR_NAMES)
 
@@ -59,6 +59,12 @@ def _scale(runs: Sequence[pd.DataFrame], prefix: str, names: Sequence[str],
     r = np.concatenate([run[[f"{prefix}{s}" for s in names]].to_numpy(float).ravel()
                         for run in runs])
     return float(robust_scale(r[np.isfinite(r)])) if np.isfinite(r).any() else fallback
+
+
+def _median(r: np.ndarray) -> float:
+    """Median of the finite values of ``r`` (0 when there is none)."""
+    f = r[np.isfinite(r)]
+    return float(np.median(f)) if f.size else 0.0
 
 
 def _peaks(runs: Sequence[pd.DataFrame], prefix: str, names: Sequence[str], sigma: float,
@@ -108,8 +114,9 @@ def calibrate_thresholds(
         min_h: Lower bound of every CUSUM threshold [σ·samples] (a margin for walks
             unlike the calibration ones).
         summary: When given, filled with ``corner_median`` (each corner residual's median
-            over its valid phase, ``SENSOR_NAMES`` order [fraction of the weight]) and
-            ``corner_sigma``: the input of :func:`corner_tilt`.
+            over its valid phase, ``SENSOR_NAMES`` order [fraction of the weight], all
+            logs pooled), ``corner_median_per_log`` (the same per log) and
+            ``corner_sigma``: the input of :func:`corner_tilt` / :func:`tilt_hint`.
 
     Returns:
         New :class:`Thresholds`.
@@ -147,10 +154,11 @@ def calibrate_thresholds(
     if summary is not None:
         res = [np.concatenate([run[f"res_corner_{s}"].to_numpy(float) for run in runs])
                for s in SENSOR_NAMES]
-        summary["corner_median"] = np.array(
-            [float(np.median(r[np.isfinite(r)])) if np.isfinite(r).any() else 0.0
-             for r in res])
+        summary["corner_median"] = np.array([_median(r) for r in res])
         summary["corner_sigma"] = sigma_c
+        summary["corner_median_per_log"] = [
+            np.array([_median(run[f"res_corner_{s}"].to_numpy(float)) for s in SENSOR_NAMES])
+            for run in runs]
     p_sw = _peaks(runs, "res_swing_", SENSOR_NAMES, sigma_sw, base.swing_kappa)
     p_t = _peaks(runs, "res_total_", SIDES, sigma_t, base.total_kappa)
     p_c = _peaks(runs, "res_corner_", SENSOR_NAMES, sigma_c, base.corner_kappa)
@@ -186,25 +194,11 @@ class CornerTilt:
     cop_shift_m: tuple[float, float]
     share: float
 
-    #: ``share`` from which :func:`corner_tilt`'s pattern is worth fitting: on the exact
-    #: model, IMU attitude errors of 1-4 mrad give 0.56-0.67 (and self-calibration then
-    #: lowers the per-corner threshold by 8-49 %), 1 mrad or less 0.27-0.28 (no gain), a
-    #: corrected walk 0.15 or less (``benchmarks/bench_attitude_bias.py``).
-    WORTH_FITTING = 0.4
-
-    def hint(self) -> str | None:
-        """A sentence for ``grfguard calibrate`` when the pattern is worth fitting."""
-        if self.share < self.WORTH_FITTING:
-            return None
-        dx, dy = (1000 * v for v in self.cop_shift_m)
-        where = " and ".join(
-            f"{abs(v):.1f} mm {word[v < 0]}" for v, word in
-            ((dx, ("forward", "back")), (dy, ("to the left", "to the right"))) if abs(v) >= 0.05)
-        return (f"the load cells put each stance sole's centre of pressure {where} of "
-                f"where the model does, all along the logs: a steady pattern worth "
-                f"{self.share:.0%} of the per-corner noise scale, which it inflates. An IMU "
-                "attitude error or a trunk CoM offset does this; `grfguard calibrate "
-                "--model` fits both and lowers the per-corner threshold")
+    #: ``share`` from which :func:`tilt_hint` reports the pattern: on the exact model's
+    #: walks, IMU attitude errors of 1-4 mrad give 0.56-0.67 (the per-corner threshold
+    #: 4-49 % above that of the same walk corrected), 1 mrad or less 0.27-0.28, corrected
+    #: walks 0.09-0.14 (``benchmarks/bench_attitude_bias.py``).
+    REPORT_SHARE = 0.4
 
 
 def corner_tilt(corner_median: np.ndarray, corner_sigma: float,
@@ -236,3 +230,53 @@ def corner_tilt(corner_median: np.ndarray, corner_sigma: float,
     fit = A2 @ d
     share = float(np.sqrt(np.mean(fit ** 2)) / corner_sigma) if corner_sigma > 0 else 0.0
     return CornerTilt(cop_shift_m=(float(d[0]), float(d[1])), share=share)
+
+
+def tilt_hint(summary: dict, sensor_xy: np.ndarray) -> str | None:
+    """What ``grfguard calibrate`` says about the steady centre-of-pressure shift of its
+    logs (``calibrate_thresholds(summary=...)``): None when it explains less than
+    :attr:`CornerTilt.REPORT_SHARE` of the per-corner noise scale in every log.
+
+    A shift common to several logs is a constant error of the robot (IMU mounting, trunk
+    CoM), which ``calibrate --model`` fits. A shift that changes from log to log is an
+    attitude error of the IMU's own estimate (the simulated IMU's is drawn per run):
+    ``--model`` fitted on one run is then wrong for the next (false alarms) and fitted on
+    all of them leaves it in the thresholds (``benchmarks/bench_attitude_bias.py``). One
+    log cannot tell the two apart.
+    """
+    sigma = summary["corner_sigma"]
+    per = [corner_tilt(m, sigma, sensor_xy) for m in summary["corner_median_per_log"]]
+    if not per or max(t.share for t in per) < CornerTilt.REPORT_SHARE:
+        return None
+
+    def where(t: CornerTilt) -> str:
+        dx, dy = (1000 * v for v in t.cop_shift_m)
+        parts = [f"{abs(v):.1f} mm {word[v < 0]}" for v, word in
+                 ((dx, ("forward", "back")), (dy, ("to the left", "to the right")))
+                 if abs(v) >= 0.05]
+        return " and ".join(parts) or "0 mm"
+
+    head = ("the load cells put each stance sole's centre of pressure {} of where the "
+            "model does, all along the log{}: a steady pattern worth {:.0%} of the "
+            "per-corner noise scale, which it inflates. ")
+    if len(per) == 1:
+        return head.format(where(per[0]), "", per[0].share) + (
+            "A constant error of the robot (IMU mounting, trunk CoM offset) does this, and "
+            "`grfguard calibrate --model` would fit it; so does an attitude error of the "
+            "IMU's own estimate that changes from run to run, and fitted on one run that "
+            "lowers the threshold below what the next run needs. Calibrate on logs of "
+            "several runs to tell them apart")
+    d = np.array([t.cop_shift_m for t in per])
+    mean = d.mean(axis=0)
+    common = bool(np.max(np.linalg.norm(d - mean, axis=1)) <= 0.5 * np.linalg.norm(mean))
+    each = "; ".join(f"log {k + 1}: {where(t)}" for k, t in enumerate(per))
+    pooled = corner_tilt(summary["corner_median"], sigma, sensor_xy)
+    if common:
+        return head.format(where(pooled), "s", pooled.share) + (
+            f"It is common to the {len(per)} logs ({each}): a constant error of the "
+            "robot (IMU mounting, trunk CoM offset); `grfguard calibrate --model` fits it "
+            "and lowers the per-corner threshold")
+    return (f"the load cells' centre of pressure is off the model's by a steady amount "
+            f"that changes from log to log ({each}): an attitude error of the IMU's own "
+            "estimate, not its mounting. `grfguard calibrate --model` would not remove "
+            "it (one run's fit is wrong for the next); these thresholds cover it")
