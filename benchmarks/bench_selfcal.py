@@ -239,11 +239,12 @@ def own_alarms(log, corr, cfg) -> list[str]:
     return rows
 
 
-def paper_scenario(gap: RealityGap, corr, cfg) -> dict[str, dict[str, float]]:
-    """Delays [s], frozen delay after the next load [s] and recovery RMSE [N]."""
+def paper_scenario(gap: RealityGap, corr, cfg, prepare=None) -> dict[str, dict[str, float]]:
+    """Delays [s], frozen delay after the next load [s] and recovery RMSE [N]
+    (``prepare(log)``, if given, changes the faulty log before the corrections)."""
     walk = simulate(gait=GaitConfig(duration=60.0), seed=0, reality=gap)
     faulty = inject_faults(walk, [parse_fault_spec(s) for s in PAPER_FAULTS], seed=0)
-    fc = apply_corrections(faulty, corr)
+    fc = apply_corrections(faulty if prepare is None else prepare(faulty), corr)
     out = Monitor.for_log(fc, config=cfg).run(fc)
     det = evaluate_frame(out)["detection"]["sensors"]
     t = out["time"].to_numpy(float)
