@@ -16,8 +16,9 @@ Per seed, on the exact model's 60 s default walk (default monitor config):
 * the attitude bias of the logged quaternion against the true trunk orientation (roll,
   pitch) [mrad] (truth columns: the benchmark reads them, the monitor does not);
 * the per-corner residuals' medians over single support (``calibrate_thresholds``'
-  ``summary``): the worst, and the roll and pitch patterns ``(r1 - r2 + r3 - r4 + l1 - l2 + l3 - l4) / 8`` and ``(r1 + r2 - r3 -
-  r4 + l1 + l2 - l3 - l4) / 8`` [fraction of the weight], and the share of the corner
+  ``summary``): the worst, and the roll and pitch patterns ``(r1 - r2 + r3 - r4 + l1 -
+  l2 + l3 - l4) / 8`` and ``(r1 + r2 - r3 - r4 + l1 + l2 - l3 - l4) / 8`` [fraction of
+  the weight], and the share of the corner
   noise scale that a steady CoP shift explains (``corner_tilt``, what ``grfguard
   calibrate`` reports);
 * the per-corner threshold ``sigma * h`` calibrated on the walk (``calibrate_thresholds``,

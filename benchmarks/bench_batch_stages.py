@@ -25,12 +25,11 @@ BENCHMARKS.md.
 
 from __future__ import annotations
 
+import sys
 import time
 from importlib import resources
-from typing import Any
-
-import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd

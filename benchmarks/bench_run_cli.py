@@ -53,7 +53,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import BENCHMARKS_MD, reference_us, update_section
+from _common import BENCHMARKS_MD, update_section
 
 SECTION = "## grfguard run end to end (issue 11)"
 #: The runs' environment: Python may write the bytecode of grfguard's own modules (as a

@@ -61,6 +61,21 @@ def _scale(runs: Sequence[pd.DataFrame], prefix: str, names: Sequence[str],
     return float(robust_scale(r[np.isfinite(r)])) if np.isfinite(r).any() else fallback
 
 
+def _corner_summary(runs: Sequence[pd.DataFrame], sigma_c: float) -> dict:
+    """``calibrate_thresholds``' ``summary``: ``corner_median`` (each corner residual's
+    median over its valid phase, ``SENSOR_NAMES`` order [fraction of the weight], all
+    runs pooled), ``corner_median_per_log`` (the same per run) and ``corner_sigma``."""
+    res = [np.concatenate([run[f"res_corner_{s}"].to_numpy(float) for run in runs])
+           for s in SENSOR_NAMES]
+    return {
+        "corner_median": np.array([_median(r) for r in res]),
+        "corner_sigma": sigma_c,
+        "corner_median_per_log": [
+            np.array([_median(run[f"res_corner_{s}"].to_numpy(float)) for s in SENSOR_NAMES])
+            for run in runs],
+    }
+
+
 def _median(r: np.ndarray) -> float:
     """Median of the finite values of ``r`` (0 when there is none)."""
     f = r[np.isfinite(r)]
@@ -113,10 +128,8 @@ def calibrate_thresholds(
         safety: Factor on the largest fault-free statistic.
         min_h: Lower bound of every CUSUM threshold [σ·samples] (a margin for walks
             unlike the calibration ones).
-        summary: When given, filled with ``corner_median`` (each corner residual's median
-            over its valid phase, ``SENSOR_NAMES`` order [fraction of the weight], all
-            logs pooled), ``corner_median_per_log`` (the same per log) and
-            ``corner_sigma``: the input of :func:`corner_tilt` / :func:`tilt_hint`.
+        summary: When given, filled with the corner residuals' medians and noise scale
+            (:func:`_corner_summary`): the input of :func:`tilt_hint`.
 
     Returns:
         New :class:`Thresholds`.
@@ -152,13 +165,7 @@ def calibrate_thresholds(
     sigma_t = _scale(runs, "res_total_", SIDES, base.total_sigma)
     sigma_c = _scale(runs, "res_corner_", SENSOR_NAMES, base.corner_sigma)
     if summary is not None:
-        res = [np.concatenate([run[f"res_corner_{s}"].to_numpy(float) for run in runs])
-               for s in SENSOR_NAMES]
-        summary["corner_median"] = np.array([_median(r) for r in res])
-        summary["corner_sigma"] = sigma_c
-        summary["corner_median_per_log"] = [
-            np.array([_median(run[f"res_corner_{s}"].to_numpy(float)) for s in SENSOR_NAMES])
-            for run in runs]
+        summary.update(_corner_summary(runs, sigma_c))
     p_sw = _peaks(runs, "res_swing_", SENSOR_NAMES, sigma_sw, base.swing_kappa)
     p_t = _peaks(runs, "res_total_", SIDES, sigma_t, base.total_kappa)
     p_c = _peaks(runs, "res_corner_", SENSOR_NAMES, sigma_c, base.corner_kappa)
