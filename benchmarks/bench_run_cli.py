@@ -274,7 +274,8 @@ def main() -> None:
         f"Command: `.venv/bin/python benchmarks/bench_run_cli.py --duration {args.duration:g} "
         f"--repeat {args.repeat}{' --check' if args.check else ''}` ({platform.machine()}, "
         f"{os.cpu_count()} cores, "
-        f"{core}Python {platform.python_version()}{load} at the start). The log: "
+        f"{core}Python {platform.python_version()}{load} at the start; "
+        f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC). The log: "
         f"`grfguard simulate --duration {args.duration:g}` ({n} samples, {size_in:.0f} MB); "
         f"the output {size_out:.0f} MB.",
         "",
