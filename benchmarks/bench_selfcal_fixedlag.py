@@ -20,7 +20,7 @@ edges padded with the first / last sample):
 * the paper's scenario on that robot: delays of the batch run, plus ``L`` for the
   streaming monitor that decides ``L`` late.
 
-Usage: ``python benchmarks/bench_selfcal_fixedlag.py [--seeds 1,2] [--write]``; ``--write``
+Usage: ``python benchmarks/bench_selfcal_fixedlag.py [--seeds 1,2,3] [--write]``; ``--write``
 replaces the ``## Model self-calibration: a fixed-lag gyro smoother`` section of
 BENCHMARKS.md.
 """
@@ -49,19 +49,22 @@ HEADER = "## Model self-calibration: a fixed-lag gyro smoother"
 LAGS_MS = (0, 20, 40, 60)
 CUTOFF_HZ = 10.0
 READING = (
-    'Reading. Deciding 20 ms late is enough: with the gyro smoothed over +-20 ms the per-c'
-    'orner ratio is 1.93x on seed 1 and 1.87x on seed 2 (2.02x / 1.98x as today), with no '
-    "false alarm on the 10 minutes of other walks and the paper's scenario detected at the"
-    ' same samples (a streaming monitor reports them 20 ms later: 0.044 / 0.341 / 0.504 / '
-    "0.341 s, the frozen sensor 0.044 s after its foot's next load, all within issue 10's "
-    'bounds). More smoothing lowers the ratio further but raises alarms (40 ms: 1.85x / 1.'
-    '78x, 0 / 1 episodes; 60 ms: 1.82x / 1.76x, 2 / 3). This is the way to meet the per-co'
-    'rner bound measured so far that keeps every other bound; it needs a monitor that deci'
-    'des `L` late (a delay line on its inputs, `update` answering for the sample `L` earli'
-    'er, a flush at the end; the batch run is the gyro filtered with the same taps), which'
-    ' the library does not have yet: a design decision about detection latency for the acc'
-    "elerometer-free sensor only (the exact model's monitor, with a quiet accelerometer, w"
-    'ould stay causal).'
+    'Reading. With the gyro smoothed over +-20 ms the per-corner ratio is 1.93x on seed 1 '
+    'and 1.87x on seed 2 (2.02x / 1.98x as today), no false alarm on the 10 minutes of oth'
+    "er walks, and the paper's scenario detected at the same samples (a streaming monitor "
+    'reports them 20 ms later: 0.044 / 0.341 / 0.504 / 0.341 s, the frozen sensor 0.044 s '
+    "after its foot's next load, all within issue 10's bounds). It is not a clean win: on "
+    'seed 3 (where the calibration keeps the Butterworth rate low-pass, every damped one r'
+    'inging on its data) 20 ms gives one alarm episode where 0, 40 and 60 ms give none, an'
+    'd on seeds 1 and 2 40-60 ms give 1-3; the alarm count does not follow `L`, so the mar'
+    'gin against false alarms is thin, as with the damping grid. It is the only change mea'
+    'sured so far that takes the per-corner ratio under 2 on seeds 1 and 2 and keeps the p'
+    "aper's bounds; it needs a monitor that decides `L` late (a delay line on its inputs, "
+    '`update` answering for the sample `L` earlier, a flush at the end; the batch run is t'
+    'he gyro filtered with the same taps), which the library does not have: a design decis'
+    "ion about detection latency for the accelerometer-free sensor only (the exact model's"
+    ' monitor, with a quiet accelerometer, would stay causal), to be judged on more seeds '
+    'than three.'
 )
 
 
@@ -94,7 +97,7 @@ def alarms(walks: dict, corr, cfg, half: int) -> list[int]:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", default="1,2")
+    ap.add_argument("--seeds", default="1,2,3")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     clock = RunClock()
