@@ -20,7 +20,7 @@ edges padded with the first / last sample):
 * the paper's scenario on that robot: delays of the batch run, plus ``L`` for the
   streaming monitor that decides ``L`` late.
 
-Usage: ``python benchmarks/bench_selfcal_fixedlag.py [--seeds 1,2,3] [--write]``; ``--write``
+Usage: ``python benchmarks/bench_selfcal_fixedlag.py [--seeds 1,2,3,4,5] [--write]``; ``--write``
 replaces the ``## Model self-calibration: a fixed-lag gyro smoother`` section of
 BENCHMARKS.md.
 """
@@ -49,22 +49,20 @@ HEADER = "## Model self-calibration: a fixed-lag gyro smoother"
 LAGS_MS = (0, 20, 40, 60)
 CUTOFF_HZ = 10.0
 READING = (
-    'Reading. With the gyro smoothed over +-20 ms the per-corner ratio is 1.93x on seed 1 '
-    'and 1.87x on seed 2 (2.02x / 1.98x as today), no false alarm on the 10 minutes of oth'
-    "er walks, and the paper's scenario detected at the same samples (a streaming monitor "
-    'reports them 20 ms later: 0.044 / 0.341 / 0.504 / 0.341 s, the frozen sensor 0.044 s '
-    "after its foot's next load, all within issue 10's bounds). It is not a clean win: on "
-    'seed 3 (where the calibration keeps the Butterworth rate low-pass, every damped one r'
-    'inging on its data) 20 ms gives one alarm episode where 0, 40 and 60 ms give none, an'
-    'd on seeds 1 and 2 40-60 ms give 1-3; the alarm count does not follow `L`, so the mar'
-    'gin against false alarms is thin, as with the damping grid. It is the only change mea'
-    'sured so far that takes the per-corner ratio under 2 on seeds 1 and 2 and keeps the p'
-    "aper's bounds; it needs a monitor that decides `L` late (a delay line on its inputs, "
-    '`update` answering for the sample `L` earlier, a flush at the end; the batch run is t'
-    'he gyro filtered with the same taps), which the library does not have: a design decis'
-    "ion about detection latency for the accelerometer-free sensor only (the exact model's"
-    ' monitor, with a quiet accelerometer, would stay causal), to be judged on more seeds '
-    'than three.'
+    "Reading. The fixed lag lowers the robot's per-corner threshold by 4-6 % at 20 ms and "
+    '9-11 % at 40-60 ms on every seed, but the ratio is set mostly by the reference: the e'
+    'xact model\'s threshold follows its simulated IMU\'s attitude error (section "Exact mod'
+    'el: the IMU\'s attitude bias and the per-corner threshold"): 0.302 / 0.313 / 0.488 / 0'
+    ".254 / 0.250 on seeds 1-5, while the robot's is 0.61-0.62 on seeds 1, 2, 4 and 5 (0.7"
+    '3 on seed 3). So 20 ms takes seeds 1 and 2 under 2x (1.93x, 1.87x) but leaves seeds 4'
+    ' and 5 at 2.31x and 2.36x (2.42x / 2.47x today; 60 ms: 2.18x / 2.21x). False alarms d'
+    'o not follow `L` (20 ms: one episode on seed 3; 40 ms: one on seed 2; 60 ms: 2, 3 and'
+    " 2 on seeds 1, 2 and 5). The paper's scenario is detected at the same samples at ever"
+    'y `L` (a streaming monitor reports them `L` later: at 20 ms 0.044 / 0.341 / 0.504 / 0'
+    ".341 s, within issue 10's bounds). So the per-corner bound is missed by about a fifth"
+    ' on seeds whose IMU attitude error is small, and no gyro smoothing closes that: the a'
+    'ccelerometer-free sensor itself must get better (its noise scale is 2.5x the self-cal'
+    "ibrated exact model's, 0.0204 / 0.0083 on seed 1)."
 )
 
 
@@ -97,7 +95,7 @@ def alarms(walks: dict, corr, cfg, half: int) -> list[int]:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", default="1,2,3")
+    ap.add_argument("--seeds", default="1,2,3,4,5")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     clock = RunClock()
