@@ -202,9 +202,9 @@ class CornerTilt:
     share: float
 
     #: ``share`` from which :func:`tilt_hint` reports the pattern: on the exact model's
-    #: walks, IMU attitude errors of 1-4 mrad give 0.56-0.67 (the per-corner threshold
-    #: 4-49 % above that of the same walk corrected), 1 mrad or less 0.27-0.28, corrected
-    #: walks 0.09-0.14 (``benchmarks/bench_attitude_bias.py``).
+    #: walks, IMU attitude errors of 1-4 mrad give 0.56-0.67 (self-calibration on the same
+    #: walk lowers their per-corner threshold by 8-49 %), about 1 mrad 0.27-0.28 (2 %),
+    #: corrected walks 0.09-0.14 (``benchmarks/bench_attitude_bias.py``).
     REPORT_SHARE = 0.4
 
 
