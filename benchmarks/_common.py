@@ -35,6 +35,17 @@ def reference_us(repeat: int = 5) -> float:
     return best * 1e6
 
 
+def alarm_episodes(out) -> int:
+    """Alarm episodes (rising edges of each sensor's flag, a flag raised at the first
+    sample counting as one) in a monitor output over the eight sole sensors."""
+    import numpy as np
+
+    from grfguard.model.robot import SENSOR_NAMES
+
+    fl = out[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
+    return int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0]))
+
+
 def update_section(section: str, body: str, path: Path = BENCHMARKS_MD) -> None:
     """Replace (or append) only ``section`` (a ``## ...`` heading) of ``path``.
 

@@ -44,16 +44,15 @@ from scipy.spatial.transform import Rotation
 from grfguard.calib import apply_corrections, corrected_config, estimate_corrections
 from grfguard.detect import Monitor, MonitorConfig, calibrate_thresholds
 from grfguard.detect.calibrate import corner_tilt
-from grfguard.model.robot import SENSOR_NAMES, SURALP
+from grfguard.model.robot import SURALP
 from grfguard.sim import simulate
 from grfguard.sim.config import GaitConfig
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RunClock, finish_section  # noqa: E402
-from bench_selfcal import GAITS  # noqa: E402
+from _common import RunClock, alarm_episodes, finish_section  # noqa: E402
+from bench_selfcal import other_walk  # noqa: E402
 
 HEADER = "## Exact model: the IMU's attitude bias and the per-corner threshold"
-#: Corner patterns (r1..r4, l1..l4; 1 front-left, 2 front-right, 3 rear-left, 4 rear-right).
 READING = (
     "Reading. The exact model's per-corner threshold is set by the simulated IMU's attitud"
     'e error, not by the walk: the roll pattern of the medians follows the roll bias (seed'
@@ -80,6 +79,7 @@ READING = (
     '0204 / 0.0083): the gap the accelerometer-free sensor leaves is wider than the 1 % th'
     'e seed-1 row shows.'
 )
+#: Corner patterns (r1..r4, l1..l4; 1 front-left, 2 front-right, 3 rear-left, 4 rear-right).
 ROLL = np.array([1, -1, 1, -1] * 2) / 8.0
 PITCH = np.array([1, 1, -1, -1] * 2) / 8.0
 
@@ -107,9 +107,7 @@ def corner_figures(logs: list, cfg: MonitorConfig, walks: dict, corr=None
     fa = 0
     for w in walks.values():
         wc = apply_corrections(w, corr) if corr is not None else w
-        fl = Monitor.for_log(wc, config=mon_cfg).run(wc)[
-            [f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
-        fa += int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0]))
+        fa += alarm_episodes(Monitor.for_log(wc, config=mon_cfg).run(wc))
     return {"worst": float(np.max(np.abs(med))), "roll": float(ROLL @ med),
             "pitch": float(PITCH @ med), "share": tilt.share, "sigma": th.corner_sigma,
             "h": th.corner_h, "level": th.corner_sigma * th.corner_h, "fa": fa}
@@ -155,11 +153,7 @@ def main() -> None:
         "share | sigma | threshold | false alarms | corrected: medians worst / roll / "
         "pitch | CoP-shift share | sigma | threshold | false alarms |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    walks = {}
-    for k in range(10):
-        sl, sp = GAITS[k % len(GAITS)]
-        walks[11 + k] = simulate(gait=GaitConfig(duration=60.0, step_length=sl,
-                                                 step_period=sp), seed=11 + k)
+    walks = {11 + k: other_walk(k) for k in range(10)}
     logs = []
     for seed in args.seeds:
         log = simulate(gait=GaitConfig(duration=60.0), seed=seed)

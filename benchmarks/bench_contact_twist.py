@@ -38,11 +38,10 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RunClock, finish_section  # noqa: E402
+from _common import RunClock, alarm_episodes, finish_section  # noqa: E402
+from bench_selfcal import GAITS, other_walk  # noqa: E402
 
 HEADER = "## Model self-calibration: contact twist"
-#: Gaits of the other walks of bench_selfcal.py: (step length [m], step period [s]).
-GAITS = ((0.12, 1.0), (0.15, 0.8), (0.08, 1.2), (0.18, 1.0), (0.1, 0.9))
 
 
 def gaps(g: RealityGap) -> dict[str, RealityGap | None]:
@@ -142,12 +141,9 @@ def main() -> None:
     eps = []
     for k in range(10):
         sl, sp = GAITS[k % len(GAITS)]
-        walk = simulate(gait=GaitConfig(duration=60.0, step_length=sl, step_period=sp),
-                        seed=11 + k, reality=g)
-        wc = apply_corrections(walk, corr)
+        wc = apply_corrections(other_walk(k, g), corr)
         out = Monitor.for_log(wc, config=ctw.with_thresholds(th)).run(wc)
-        fl = out[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
-        eps.append(int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0])))
+        eps.append(alarm_episodes(out))
         who = [s for s in SENSOR_NAMES if out[f"flag_{s}"].any()]
         print(f"  other walk seed {11 + k} ({sl:g} m, {sp:g} s): {eps[-1]} {who}", flush=True)
     lines += ["", "(3) The fitted twist on, thresholds calibrated with it on the same data "

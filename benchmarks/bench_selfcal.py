@@ -56,7 +56,7 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import RealityGap, load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import update_section  # noqa: E402
+from _common import alarm_episodes, update_section  # noqa: E402
 
 HEADER = "## Model self-calibration"
 READING = (
@@ -209,17 +209,21 @@ def level(th) -> tuple[float, float]:
     return th.corner_sigma * th.corner_h, th.total_sigma * th.total_h
 
 
+def other_walk(k: int, gap: RealityGap | None = None):
+    """The ``k``-th of the other fault-free walks: 60 s, seed ``11 + k``, gait
+    ``GAITS[k % 5]``, the robot of ``gap`` (None: the exact model)."""
+    sl, sp = GAITS[k % len(GAITS)]
+    return simulate(gait=GaitConfig(duration=60.0, step_length=sl, step_period=sp),
+                    seed=11 + k, reality=gap)
+
+
 def other_walks(gap: RealityGap, corr, cfg, minutes: float) -> tuple[int, list[str]]:
     """Healthy-sensor alarm episodes over ``minutes`` of other 60 s walks."""
     n_fa, rows = 0, []
     for k in range(int(round(minutes))):
         sl, sp = GAITS[k % len(GAITS)]
-        walk = simulate(gait=GaitConfig(duration=60.0, step_length=sl, step_period=sp),
-                        seed=11 + k, reality=gap)
-        wc = apply_corrections(walk, corr)
-        out = Monitor.for_log(wc, config=cfg).run(wc)
-        fl = out[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
-        eps = int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0]))
+        wc = apply_corrections(other_walk(k, gap), corr)
+        eps = alarm_episodes(Monitor.for_log(wc, config=cfg).run(wc))
         n_fa += eps
         rows.append(f"seed {11 + k} ({sl:g} m, {sp:g} s): {eps}")
         print(f"  other walk {rows[-1]}", flush=True)

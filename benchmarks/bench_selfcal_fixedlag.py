@@ -36,14 +36,14 @@ from scipy.signal import firwin
 
 from grfguard.calib import apply_corrections, estimate_corrections
 from grfguard.detect import Monitor, calibrate_thresholds
-from grfguard.model.robot import SENSOR_NAMES, RobotConfig
+from grfguard.model.robot import RobotConfig
 from grfguard.sim import simulate
 from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RunClock, finish_section  # noqa: E402
-from bench_selfcal import GAITS, level, paper_scenario, thresholds_of  # noqa: E402
+from _common import RunClock, alarm_episodes, finish_section  # noqa: E402
+from bench_selfcal import level, other_walk, paper_scenario, thresholds_of  # noqa: E402
 
 HEADER = "## Model self-calibration: a fixed-lag gyro smoother"
 LAGS_MS = (0, 20, 40, 60)
@@ -87,9 +87,7 @@ def alarms(walks: dict, corr, cfg, half: int) -> list[int]:
     eps = []
     for w in walks.values():
         wc = apply_corrections(gyro_fixed_lag(w, half), corr)
-        fl = Monitor.for_log(wc, config=cfg).run(wc)[
-            [f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
-        eps.append(int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0])))
+        eps.append(alarm_episodes(Monitor.for_log(wc, config=cfg).run(wc)))
     return eps
 
 
@@ -101,11 +99,7 @@ def main() -> None:
     clock = RunClock()
     gap = load_reality("all")
     nominal = RobotConfig()
-    walks = {}
-    for k in range(10):
-        sl, sp = GAITS[k % len(GAITS)]
-        walks[11 + k] = simulate(gait=GaitConfig(duration=60.0, step_length=sl,
-                                                 step_period=sp), seed=11 + k, reality=gap)
+    walks = {11 + k: other_walk(k, gap) for k in range(10)}
     lines = [
         HEADER, "",
         "`python benchmarks/bench_selfcal_fixedlag.py --write` (issue 10, Must show 2; an "

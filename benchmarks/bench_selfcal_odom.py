@@ -59,7 +59,8 @@ from grfguard.sim.config import GaitConfig
 from grfguard.sim.reality import load_reality
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RunClock, finish_section  # noqa: E402
+from _common import RunClock, alarm_episodes, finish_section  # noqa: E402
+from bench_selfcal import other_walk  # noqa: E402
 
 HEADER = "## Model self-calibration: smoothing the leg odometry"
 FS = 1000.0
@@ -272,8 +273,6 @@ def high_frequency_zmp(log, cfg0) -> list[tuple[str, float, float, float, float]
     return rows
 
 
-#: Gaits (step length m, period s) of the other walks, as ``bench_selfcal.py``.
-GAITS = ((0.12, 1.0), (0.15, 0.8), (0.08, 1.2), (0.18, 1.0), (0.1, 0.9))
 #: (label, kinematic channels' VFSConfig changes, odometry channel (cut-off, damping) or
 #: None for one low-pass on every channel)
 RING_CASES = (
@@ -289,16 +288,13 @@ RING_CASES = (
 
 def other_walks(log, cfg0, corr, minutes: int) -> list[tuple[str, float, list[int]]]:
     """Per-corner threshold on the calibration data and healthy-sensor alarm episodes on
-    ``minutes`` other 60 s walks of the robot (seeds 11 on, :data:`GAITS`) for
+    ``minutes`` other 60 s walks of the robot (seeds 11 on, `bench_selfcal.GAITS`) for
     :data:`RING_CASES` (the per-channel ones through the gravity-only accelerometer)."""
     from grfguard.detect import Monitor
 
     walks = []
     for k in range(minutes):
-        sl, sp = GAITS[k % len(GAITS)]
-        w = simulate(gait=GaitConfig(duration=60.0, step_length=sl, step_period=sp),
-                     seed=11 + k, reality=load_reality("all"))
-        walks.append(apply_corrections(w, corr))
+        walks.append(apply_corrections(other_walk(k, load_reality("all")), corr))
     rows = []
     for lab, kin, odo in RING_CASES:
         change, sub, prep = dict(kin), None, (lambda lg: lg)
@@ -313,8 +309,7 @@ def other_walks(log, cfg0, corr, minutes: int) -> list[tuple[str, float, list[in
             for w in walks:
                 wc = prep(w)
                 out = Monitor.for_log(wc, config=cfg.with_thresholds(th)).run(wc)
-                fl = out[[f"flag_{s}" for s in SENSOR_NAMES]].to_numpy(bool)
-                eps.append(int(np.sum(fl[1:] & ~fl[:-1]) + np.sum(fl[0])))
+                eps.append(alarm_episodes(out))
         rows.append((lab, th.corner_sigma * th.corner_h, eps))
         print(rows[-1], flush=True)
     return rows
