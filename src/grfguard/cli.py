@@ -6,10 +6,8 @@ on bad input are reported in one line saying what to fix, with exit code 2.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -314,10 +312,11 @@ def run_log(
     if unit_check:
         check_log_plausible(df, rob, str(log))
     mark("checks")
-    with _blas_probe_without_scipy_linalg():
-        result = _run_segments(df, config=config, thresholds=thresholds, method=method,
-                               vfs=vfs, compiled=compiled, mark=mark, output=output,
-                               source=source, skipped=skip)
+    # (the kernels load from numba's cache without its linear algebra, hence without
+    # scipy.linalg: grfguard.kernels._jit._lean_cache_class)
+    result = _run_segments(df, config=config, thresholds=thresholds, method=method,
+                           vfs=vfs, compiled=compiled, mark=mark, output=output,
+                           source=source, skipped=skip)
     if isinstance(result, int):  # written block by block (io/runwriter.py)
         mark("run_write")
         return result
@@ -326,45 +325,6 @@ def run_log(
     write_log(result, output)
     mark("write")
     return len(result)
-
-
-@contextlib.contextmanager
-def _blas_probe_without_scipy_linalg() -> Iterator[None]:
-    """numba's first kernel load checks that BLAS is there by importing
-    ``scipy.linalg.cython_blas`` (and LAPACK's), which makes Python import the whole
-    ``scipy.linalg`` package first: about 0.12 s of ``grfguard run``'s start-up for two
-    small extension modules (the monitor itself needs no scipy). Inside this context the
-    two modules are loaded alone for that check; on leaving, if ``scipy.linalg`` was
-    still not imported, they are forgotten again, so that a later ``import scipy.linalg``
-    is the ordinary one. Anything unexpected (another scipy layout, numba's context
-    already set up) leaves the imports to numba as usual."""
-    names: list[str] = []
-    if "scipy.linalg" not in sys.modules and "numba.np.arraymath" not in sys.modules:
-        try:
-            import importlib.machinery
-            import importlib.util
-
-            spec = importlib.util.find_spec("scipy.linalg")
-            where = spec.submodule_search_locations if spec is not None else None
-            for sub in ("cython_blas", "cython_lapack"):
-                name = f"scipy.linalg.{sub}"
-                found = importlib.machinery.PathFinder.find_spec(name, where)
-                if found is None or found.loader is None or name in sys.modules:
-                    break
-                module = importlib.util.module_from_spec(found)
-                sys.modules[name] = module
-                names.append(name)
-                found.loader.exec_module(module)
-        except Exception:  # noqa: BLE001 - any failure: numba imports scipy.linalg itself
-            for name in names:
-                sys.modules.pop(name, None)
-            names = []
-    try:
-        yield
-    finally:
-        if "scipy.linalg" not in sys.modules:
-            for name in names:
-                sys.modules.pop(name, None)
 
 
 def _check_run_inputs(config: Path | None, thresholds: Path | None, robot: str | None) -> Any:
