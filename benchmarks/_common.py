@@ -68,12 +68,21 @@ class RunClock:
     """Wall time, CPU time and load average from the start of a benchmark run."""
 
     def __init__(self) -> None:
-        self.t0, self.c0, self.load0 = time.time(), time.process_time(), os.getloadavg()[0]
+        self.t0, self.c0, self.load0 = time.time(), self._cpu(), os.getloadavg()[0]
+
+    @staticmethod
+    def _cpu() -> float:
+        """CPU seconds of this process and of its finished children (worker pools,
+        subprocesses)."""
+        import resource
+
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return time.process_time() + ru.ru_utime + ru.ru_stime
 
     def line(self) -> str:
         """The closing ``Runtime ...`` sentence of a section."""
         return (f"Runtime {time.time() - self.t0:.0f} s wall, "
-                f"{time.process_time() - self.c0:.0f} s CPU (load average {self.load0:.1f} at "
+                f"{self._cpu() - self.c0:.0f} s CPU (load average {self.load0:.1f} at "
                 f"the start, {os.getloadavg()[0]:.1f} at the end), measured "
                 f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC.")
 

@@ -190,7 +190,7 @@ _LEAN_CACHE = _lean_cache_class()
 def _lean(dispatcher):
     """``dispatcher`` with :func:`_lean_cache_class`'s load (when available)."""
     cache = getattr(dispatcher, "_cache", None)
-    if _LEAN_CACHE is not None and type(cache).__name__ == "FunctionCache":
+    if _LEAN_CACHE is not None and type(cache) is _LEAN_CACHE.__base__:  # numba's own
         cache.__class__ = _LEAN_CACHE
     return dispatcher
 
