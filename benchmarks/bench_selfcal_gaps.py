@@ -72,11 +72,7 @@ def corner_modes(log, cfg) -> tuple[float, list[float]]:
     """Noise scale of the per-corner residuals (all corners pooled, as
     ``calibrate_thresholds``) and the scale of each sole's four modes (right, then
     left)."""
-    th = cfg.thresholds
-    inf_th = th.replace(swing_h=1e300, total_h=1e300, corner_h=1e300,
-                        paper_eta_n=(1e300,) * 8)
-    diag, _ = _fault_free_statistics(log, dataclasses.replace(
-        cfg, method="default", thresholds=inf_th, diagnostics=True))
+    diag, _ = _fault_free_statistics(log, cfg)
     res = diag[[f"res_corner_{s}" for s in SENSOR_NAMES]].to_numpy(float)
     modes = []
     for f in range(2):

@@ -72,13 +72,7 @@ def corner_threshold(log, cfg) -> float:
 def oracles(log, cfg) -> dict[str, float]:
     """Corner threshold ``30 * sigma`` (h at its floor) of the residual with the
     sensor's corner forces advanced by 20 ms, and with its sole twist from the truth."""
-    from dataclasses import replace
-
-    th = cfg.thresholds
-    inf_th = th.replace(swing_h=1e300, total_h=1e300, corner_h=1e300,
-                        paper_eta_n=(1e300,) * 8)
-    diag, _ = _fault_free_statistics(log, replace(cfg, method="default", thresholds=inf_th,
-                                                  diagnostics=True))
+    diag, _ = _fault_free_statistics(log, cfg)
     res = diag[[f"res_corner_{s}" for s in SENSOR_NAMES]].to_numpy(float)
     m = np.isfinite(res)
     out = VirtualForceSensor.for_log(log, config_for_log(log, cfg).vfs).run(log)

@@ -33,12 +33,21 @@ __all__ = ["calibrate_thresholds", "CornerTilt", "corner_tilt", "tilt_hint"]
 _N = len(SENSOR_NAMES)
 
 
+def _unreachable(th: Thresholds) -> Thresholds:
+    """``th`` with every test's threshold out of reach: a detector that never flags, so
+    its residuals stay those of a fault-free run."""
+    return th.replace(swing_h=1e300, total_h=1e300, corner_h=1e300,
+                      paper_eta_n=(1e300,) * 8)
+
+
 def _fault_free_statistics(
     log: pd.DataFrame, config: MonitorConfig
 ) -> tuple[pd.DataFrame, DetectorInputs]:
     """The default detector's diagnostics over ``log`` (VFS columns reused or computed)
-    and the inputs it read."""
-    cfg = config_for_log(log, config)
+    with ``config``'s settings and no threshold in reach (nothing flagged), and the
+    inputs it read."""
+    cfg = config_for_log(log, replace(config, method="default", diagnostics=True,
+                                      thresholds=_unreachable(config.thresholds)))
     vfs_cols = [vfs_col(s) for s in SENSOR_NAMES] + [f"vfs_total_{s}" for s in SIDES]
     if all(c in log.columns for c in vfs_cols):
         src = log
@@ -144,15 +153,13 @@ def calibrate_thresholds(
             f"false_alarm_rate_per_hour = {false_alarm_rate_per_hour!r} must be > 0"
         )
     base = cfg.thresholds
-    inf_th = base.replace(swing_h=1e300, total_h=1e300, corner_h=1e300,
-                          paper_eta_n=(1e300,) * 8)
+    inf_th = _unreachable(base)
     runs = []
     paper_max = np.zeros(_N)
     hours = 0.0
     for log in logs:
         _check_fault_free(log)
-        diag, inputs = _fault_free_statistics(
-            log, replace(cfg, method="default", thresholds=inf_th, diagnostics=True))
+        diag, inputs = _fault_free_statistics(log, cfg)
         runs.append(diag)
         t = log[TIME].to_numpy(float)
         hours += (t[-1] - t[0]) / 3600.0
