@@ -2,7 +2,7 @@
 
 The first call in a fresh environment compiles every kernel: about three minutes of CPU
 (numba, one core; BENCHMARKS "Compiled kernels"). After that the machine code is cached
-next to the modules and a new process loads it in one to three seconds.
+next to the modules and a new process loads all of it in about 0.3 s (2026-11-27).
 :func:`warm_up` does it up front, e.g. before a live monitor starts, so no sample pays
 for it.
 """
