@@ -2,8 +2,9 @@
 
 ``cache=True`` writes the machine code next to the module (``__pycache__``); the first
 call in a fresh environment compiles (see :func:`grfguard.kernels.warm_up`), later
-processes load all of it in about 0.3 s (:func:`_lean_cache_class`). ``fastmath`` stays off: the kernels reproduce the
-pure-Python results to the last bits where the operation order allows it.
+processes load all of it in about 0.3 s (:func:`_lean_cache_class`). ``fastmath`` stays
+off: the kernels reproduce the pure-Python results to the last bits where the operation
+order allows it.
 """
 
 from __future__ import annotations
