@@ -41,10 +41,9 @@ from grfguard.sim.reality import RealityGap, load_reality
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RunClock, finish_section  # noqa: E402
 from bench_selfcal import level, thresholds_of  # noqa: E402
+from bench_selfcal_twin import H4  # noqa: E402  (a sole's four corner modes)
 
 HEADER = "## Model self-calibration: the per-corner threshold gap by gap"
-#: Corner modes of a sole (rows): total, front - rear, left - right, twist; corners 1-4.
-H4 = np.array([[1, 1, 1, 1], [1, 1, -1, -1], [1, -1, 1, -1], [1, -1, -1, 1]], float) / 2
 GAPS = tuple(f.name for f in dataclasses.fields(RealityGap) if f.name != "seed")
 READING = (
     'Reading (2026-11-27). Two things set the ratio, and neither is a model error left '

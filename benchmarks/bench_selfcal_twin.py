@@ -60,6 +60,7 @@ SETTINGS = (
       for c, z in ((10.0, 0.5), (9.0, 0.5), (8.0, 0.5), (8.0, 0.45), (8.0, 0.4), (7.0, 0.4),
                    (7.0, 0.3))),
 )
+#: Corner modes of a sole (rows): total, front - rear, left - right, twist; corners 1-4.
 H4 = np.array([[1, 1, 1, 1], [1, 1, -1, -1], [1, -1, 1, -1], [1, -1, -1, 1]], float) / 2
 
 

@@ -10,6 +10,9 @@ the whole step on a fake package directory (no compilation).
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -220,10 +223,6 @@ print(ok, sincos_flat.stats.cache_hits.get(sincos_flat.signatures[0], 0),
 
 
 def _probe(cache_dir: Path) -> list[str]:
-    import os
-    import subprocess
-    import sys
-
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir)}
     res = subprocess.run([sys.executable, "-c", _LEAN_PROBE], capture_output=True,
                          text=True, env=env, check=True, timeout=300)
