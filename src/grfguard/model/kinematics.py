@@ -52,6 +52,16 @@ def _as_traj(p: np.ndarray, R: np.ndarray, n: int | None = None) -> tuple[np.nda
     return np.broadcast_to(p, (t, 3)), np.broadcast_to(R, (t, 3, 3))
 
 
+def _is_identity(R: np.ndarray) -> bool:
+    """True for one (3, 3) rotation that is the identity (no negative zero): a product
+    with it gives the other factor's values (the vectorized paths skip it)."""
+    R = np.asarray(R)
+    return R.shape == (3, 3) and bool(np.array_equal(R, _EYE)) and not np.signbit(R).any()
+
+
+_EYE = np.eye(3)
+
+
 def _hip_offset_in_pelvis(robot: RobotConfig, side: str) -> np.ndarray:
     return np.array([0.0, robot.hip_width / 2 if side == "l" else -robot.hip_width / 2, 0.0])
 
@@ -94,13 +104,17 @@ def leg_ik(
         ankle_roll.
     """
     _check_side(side)
+    # an upright pelvis or a flat sole (the pattern generator's usual case): the products
+    # with the identity are left out (same values: BENCHMARKS.md "Simulation speed")
+    upright, flat = _is_identity(R_WB), _is_identity(R_WS)
     p_WB, R_WB = _as_traj(p_WB, R_WB)
     p_WS, R_WS = _as_traj(p_WS, R_WS, p_WB.shape[0])
     p_WB, R_WB = _as_traj(p_WB, R_WB, p_WS.shape[0])
     a, b = robot.upper_leg_length, robot.lower_leg_length
-    p_WH = p_WB + R_WB @ _hip_offset_in_pelvis(robot, side)
-    p_WA = p_WS + R_WS @ _ankle_in_sole(robot)
-    r = np.einsum("tji,tj->ti", R_WS, p_WH - p_WA)
+    hip, ankle = _hip_offset_in_pelvis(robot, side), _ankle_in_sole(robot)
+    p_WH = p_WB + (hip if upright else R_WB @ hip)
+    p_WA = p_WS + (ankle if flat else R_WS @ ankle)
+    r = p_WH - p_WA if flat else np.einsum("tji,tj->ti", R_WS, p_WH - p_WA)
     c = np.linalg.norm(r, axis=1)
     cos_knee = np.clip((c**2 - a**2 - b**2) / (2 * a * b), -1.0, 1.0)
     knee = np.arccos(cos_knee)
@@ -112,17 +126,31 @@ def leg_ik(
     ankle_pitch = (
         -np.arctan2(r[:, 0], np.sign(r[:, 2]) * np.sqrt(r[:, 1] ** 2 + r[:, 2] ** 2)) - q_a
     )
-    R = (
-        np.swapaxes(R_WB, 1, 2)
-        @ R_WS
-        @ rot_x(-ankle_roll)
-        @ rot_y(-(knee + ankle_pitch))
-    )
-    yaw = np.arctan2(-R[:, 0, 1], R[:, 1, 1])
+    if upright and flat:
+        r01, r11, r20, r21, r22 = _hip_entries(-ankle_roll, -(knee + ankle_pitch))
+    else:
+        R = (
+            np.swapaxes(R_WB, 1, 2)
+            @ R_WS
+            @ rot_x(-ankle_roll)
+            @ rot_y(-(knee + ankle_pitch))
+        )
+        r01, r11, r20, r21, r22 = R[:, 0, 1], R[:, 1, 1], R[:, 2, 0], R[:, 2, 1], R[:, 2, 2]
+    yaw = np.arctan2(-r01, r11)
     cz, sz = np.cos(yaw), np.sin(yaw)
-    roll = np.arctan2(R[:, 2, 1], -R[:, 0, 1] * sz + R[:, 1, 1] * cz)
-    pitch = np.arctan2(-R[:, 2, 0], R[:, 2, 2])
+    roll = np.arctan2(r21, -r01 * sz + r11 * cz)
+    pitch = np.arctan2(-r20, r22)
     return np.stack([yaw, roll, pitch, knee, ankle_pitch, ankle_roll], axis=1)
+
+
+def _hip_entries(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Entries (0, 1), (1, 1), (2, 0), (2, 1), (2, 2) of ``rot_x(a) @ rot_y(b)`` for
+    ``|a| <= pi / 2``, ``|b| < pi / 2``, with the matrix product's bits: each entry of
+    that product has at most one non-zero term, so it is that term, or +0 where the
+    terms are zeros (``x + 0.0`` turns -0 into +0 and changes nothing else)."""
+    ca, sa = np.cos(a), np.sin(a)
+    cb, sb = np.cos(b), np.sin(b)
+    return np.zeros_like(ca), ca, ca * -sb + 0.0, sa + 0.0, ca * cb
 
 
 def leg_fk(
@@ -175,7 +203,10 @@ def body_poses(
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if q.shape[1] != 12:
         raise ConfigError(f"q must have 12 columns (JOINT_NAMES order), got shape {q.shape}")
+    one_R = np.ndim(R_WB) == 2
     p_WB, R_WB = _as_traj(p_WB, R_WB, q.shape[0])
+    if one_R and q.shape[0] >= _COMPILED_MIN_SAMPLES:
+        return _compiled_poses(robot, p_WB, R_WB, q)[0]
     from grfguard.model.robot import JOINT_NAMES
 
     col = {j: i for i, j in enumerate(JOINT_NAMES)}
@@ -186,6 +217,52 @@ def body_poses(
         R = Rp @ _rot_axis(spec.axis, q[:, col[spec.joint]])
         poses[spec.name] = (p, R)
     return poses
+
+
+#: Trajectories of at least this many samples (with one trunk orientation) take the
+#: compiled path (:mod:`grfguard.kernels.chain`, same values to the bit); shorter ones
+#: numpy's (numba's import and cache load cost more than they save there).
+_COMPILED_MIN_SAMPLES = 256
+
+
+def _compiled_poses(
+    robot: RobotConfig, p_WB: np.ndarray, R_WB: np.ndarray, q: np.ndarray
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray, np.ndarray,
+           np.ndarray]:
+    """:func:`body_poses` for one trunk orientation, compiled: the poses, the root's
+    position (T, 3) and orientation (3, 3), and the arrays ``P`` (nb, T, 3) and ``R``
+    (nb, T, 3, 3) the poses view (body 0's rows unused)."""
+    from grfguard.kernels.chain import chain_poses
+    from grfguard.model.robot import JOINT_NAMES
+
+    specs = body_layout(robot)
+    names = [sp.name for sp in specs]
+    col = {j: i for i, j in enumerate(JOINT_NAMES)}
+    n, nb = q.shape[0], len(specs)
+    C, S = np.ones((nb, n)), np.zeros((nb, n))
+    for b, sp in enumerate(specs[1:], 1):
+        a = q[:, col[sp.joint]]  # the column view numpy's path takes cos / sin of
+        C[b], S[b] = np.cos(a), np.sin(a)
+    p0 = np.ascontiguousarray(p_WB, dtype=float)
+    R0 = np.ascontiguousarray(R_WB[0], dtype=float)
+    P, R = np.empty((nb, n, 3)), np.empty((nb, n, 3, 3))
+    chain_poses(
+        p0, R0, np.array([0] + [names.index(sp.parent) for sp in specs[1:]], dtype=np.int64),
+        np.array([(0.0, 0.0, 0.0)] + [sp.pos_in_parent for sp in specs[1:]], dtype=float),
+        np.array([0] + [_axis_index(sp.axis) for sp in specs[1:]], dtype=np.int64),
+        C, S, P, R,
+    )
+    poses = {"trunk": (p_WB, R_WB)}
+    poses.update((sp.name, (P[b], R[b])) for b, sp in enumerate(specs) if b)
+    return poses, p0, R0, P, R
+
+
+def _axis_index(axis: tuple[float, float, float]) -> int:
+    """0, 1, 2 for the unit x, y, z axis (what :func:`grfguard.rotations.rot_axis` takes)."""
+    units = {(1.0, 0.0, 0.0): 0, (0.0, 1.0, 0.0): 1, (0.0, 0.0, 1.0): 2}
+    if tuple(axis) not in units:
+        raise ValueError(f"unsupported joint axis {axis}")
+    return units[tuple(axis)]
 
 
 def center_of_mass(
@@ -199,6 +276,17 @@ def center_of_mass(
         R_WB: Trunk orientation in world, (T, 3, 3) or (3, 3).
         q: Joint angles [rad], (T, 12) or (12,), JOINT_NAMES order.
     """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    if np.ndim(R_WB) == 2 and q.shape[0] >= _COMPILED_MIN_SAMPLES and q.shape[1] == 12:
+        from grfguard.kernels.chain import chain_com
+
+        p_WB, R_WB = _as_traj(p_WB, R_WB, q.shape[0])
+        _, p0, R0, P, R = _compiled_poses(robot, p_WB, R_WB, q)
+        specs = body_layout(robot)
+        out = np.empty((q.shape[0], 3))
+        chain_com(p0, R0, np.array([sp.mass for sp in specs]),
+                  np.array([sp.com_in_body for sp in specs], dtype=float), P, R, out)
+        return out
     poses = body_poses(robot, p_WB, R_WB, q)
     total = 0.0
     acc = 0.0

@@ -223,24 +223,26 @@ def preview_control(
     a = A.tolist()
     b = B.tolist()
     gx0, gx1, gx2 = (float(v) for v in g_x)
+    a01, a02, a12 = a[0][1], a[0][2], a[1][2]
+    b0, b1, b2 = b
+    ng = -g_i
     for ax in range(d):
         c0, c1, c2 = float(x[0, ax]), float(x[1, ax]), float(x[2, ax])
         esum = 0.0
-        pr = p[:, ax].tolist()
-        fa = f[:, ax].tolist()
-        out = np.empty((k_n, 3))
-        uo = np.empty(k_n)
-        for k in range(k_n):
-            esum += c0 - cz * c2 - pr[k]
-            u = -g_i * esum - gx0 * c0 - gx1 * c1 - gx2 * c2 - fa[k]
-            out[k, 0], out[k, 1], out[k, 2] = c0, c1, c2
-            uo[k] = u
+        out: list[float] = []  # c0, c1, c2 of each sample (Python floats: no item writes)
+        uo: list[float] = []
+        put, put_u = out.extend, uo.append
+        for pk, fk in zip(p[:, ax].tolist(), f[:, ax].tolist(), strict=True):
+            esum += c0 - cz * c2 - pk
+            u = ng * esum - gx0 * c0 - gx1 * c1 - gx2 * c2 - fk
+            put((c0, c1, c2))
+            put_u(u)
             c0, c1, c2 = (
-                c0 + a[0][1] * c1 + a[0][2] * c2 + b[0] * u,
-                c1 + a[1][2] * c2 + b[1] * u,
-                c2 + b[2] * u,
+                c0 + a01 * c1 + a02 * c2 + b0 * u,
+                c1 + a12 * c2 + b1 * u,
+                c2 + b2 * u,
             )
-        states[:, :, ax] = out
+        states[:, :, ax] = np.array(out).reshape(k_n, 3)
         jerk[:, ax] = uo
     return states, jerk
 
@@ -610,25 +612,25 @@ def feedforward_torques(
     n_i = idx.size
     f_inv = np.empty((n_i, model.nv))
     jacs = np.zeros((2, n_i, 6, model.nv))
-    qpos = np.empty(model.nq)
-    qvel = np.zeros(model.nv)
-    qacc = np.zeros(model.nv)
-    qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
-    for n, k in enumerate(idx):
-        qpos[:3] = p_WB[k]
-        qpos[7:] = q[k]
-        qvel[:3] = vb[k]
-        qvel[6:] = qd[k]
-        qacc[:3] = ab[k]
-        qacc[6:] = qdd[k]
-        data.qpos[:] = qpos
-        data.qvel[:] = qvel
-        data.qacc[:] = qacc
-        mujoco.mj_inverse(model, data)
-        f_inv[n] = data.qfrc_inverse
-        for i, site in enumerate(sites):
-            jac = jacs[i, n]
-            mujoco.mj_jacSite(model, data, jac[:3], jac[3:], site)
+    # the states of every evaluation, built at once (upright pelvis at rest in rotation)
+    qpos = np.zeros((n_i, model.nq))
+    qvel = np.zeros((n_i, model.nv))
+    qacc = np.zeros((n_i, model.nv))
+    qpos[:, :3], qpos[:, 3], qpos[:, 7:] = p_WB[idx], 1.0, q[idx]
+    qvel[:, :3], qvel[:, 6:] = vb[idx], qd[idx]
+    qacc[:, :3], qacc[:, 6:] = ab[idx], qdd[idx]
+    d_qpos, d_qvel, d_qacc, d_frc = data.qpos, data.qvel, data.qacc, data.qfrc_inverse
+    inverse, jac_site = mujoco.mj_inverse, mujoco.mj_jacSite
+    (r_site, l_site), (r_jac, l_jac) = sites, jacs
+    for n in range(n_i):
+        d_qpos[:] = qpos[n]
+        d_qvel[:] = qvel[n]
+        d_qacc[:] = qacc[n]
+        inverse(model, data)
+        f_inv[n] = d_frc
+        jr, jl = r_jac[n], l_jac[n]
+        jac_site(model, data, jr[:3], jr[3:], r_site)
+        jac_site(model, data, jl[:3], jl[3:], l_site)
     share = np.stack([right_share[idx], 1.0 - right_share[idx]])  # (2, n_i)
     ground = np.zeros((n_i, 12))
     for i in range(2):
