@@ -69,6 +69,14 @@ def test_compiled_chain_is_used_and_short_trajectories_are_not():
     assert poses["r_foot"][0].base is not None
     short = K.body_poses(SURALP, np.zeros(3), np.eye(3), q[:-1])
     assert short["r_foot"][0].base is None
+    # whatever the inputs' layout, one compiled signature (no second compilation)
+    from grfguard.kernels import chain
+
+    K.center_of_mass(SURALP, np.zeros((q.shape[0], 3)), np.eye(3), q)
+    K.body_poses(SURALP, np.zeros((q.shape[0], 3))[:, ::-1], rot_z(0.1), q)
+    chain.warm()
+    assert len(chain.chain_poses.signatures) == 1
+    assert len(chain.chain_com.signatures) == 1
 
 
 def test_hip_entries_equal_the_matrix_product():

@@ -243,8 +243,9 @@ def _compiled_poses(
     for b, sp in enumerate(specs[1:], 1):
         a = q[:, col[sp.joint]]  # the column view numpy's path takes cos / sin of
         C[b], S[b] = np.cos(a), np.sin(a)
-    p0 = np.ascontiguousarray(p_WB, dtype=float)
-    R0 = np.ascontiguousarray(R_WB[0], dtype=float)
+    # writable copies: one compiled signature (broadcast inputs are read-only views)
+    p0 = np.array(p_WB, dtype=float, order="C")
+    R0 = np.array(R_WB[0], dtype=float, order="C")
     P, R = np.empty((nb, n, 3)), np.empty((nb, n, 3, 3))
     chain_poses(
         p0, R0, np.array([0] + [names.index(sp.parent) for sp in specs[1:]], dtype=np.int64),
