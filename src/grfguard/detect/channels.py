@@ -350,8 +350,11 @@ class ChannelMonitor:
             LogFormatError: No F/T channel with its virtual channel, no contact column,
                 or a channel without a calibrated scale.
         """
+        from grfguard.io.logio import without_attrs
         from grfguard.kernels.channels import KIND_NAMES, channels_run
 
+        attrs = log.attrs
+        log = without_attrs(log)  # pandas deep-copies the metadata on every access
         chans = _channels(log)
         self._check(chans)
         t = np.ascontiguousarray(log["time"].to_numpy(float))
@@ -361,7 +364,7 @@ class ChannelMonitor:
         if self.dt_s is None and t.size > 1:
             self.dt_s = float(np.median(np.diff(t)))
         n, m = t.size, len(chans)
-        # one frame access per block (each access deep-copies the log's attrs)
+        # one frame access per block
         X = np.ascontiguousarray(log[chans].to_numpy(float)).reshape(n, m)
         V = np.ascontiguousarray(log[[f"vfs_{c[3:]}" for c in chans]].to_numpy(float)
                                  ).reshape(n, m)
@@ -381,7 +384,7 @@ class ChannelMonitor:
                 out[k] = a
         else:
             out = pd.concat([log, pd.DataFrame(cols, index=log.index)], axis=1)
-        out.attrs = {**log.attrs, "channel_monitor": {"h": self.config.h,
+        out.attrs = {**attrs, "channel_monitor": {"h": self.config.h,
                                                       "kappa": self.config.kappa,
                                                       "source": self.config.source}}
         return out

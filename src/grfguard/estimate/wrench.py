@@ -519,6 +519,9 @@ def estimate_wrenches(df: pd.DataFrame, robot: LoadedRobot, window: float = 0.1,
     Raises:
         LogFormatError: A joint column is missing.
     """
+    from grfguard.io.logio import without_attrs
+
+    df = without_attrs(df)  # read only: no deep copy of the metadata per column access
     sig = _signals(df, robot, window)
     fo = None
     if compiled:

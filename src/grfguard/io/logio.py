@@ -529,7 +529,7 @@ def find_time_gaps(df: pd.DataFrame, gap_s: float | None = None) -> list[list[fl
     first row after the gap. Steps across ``segment`` boundaries are not gaps."""
     if TIME not in df.columns or len(df) < 3:
         return []
-    df = _bare(df)
+    df = without_attrs(df)
     t = df[TIME].to_numpy(dtype=float)
     dt = np.diff(t)
     if SEGMENT in df.columns:
@@ -542,7 +542,7 @@ def find_time_gaps(df: pd.DataFrame, gap_s: float | None = None) -> list[list[fl
     return [[int(i) + 1, float(t[i]), float(t[i + 1])] for i in idx]
 
 
-def _bare(df: pd.DataFrame) -> pd.DataFrame:
+def without_attrs(df: pd.DataFrame) -> pd.DataFrame:
     """``df`` without its metadata (no copy of the data): pandas deep-copies ``attrs``
     on every column access, which costs more than the checks on a long log."""
     if not df.attrs:
@@ -579,7 +579,7 @@ def validate_log(
         raise LogFormatError(
             f"{where}: missing column 'time' [s]; every log needs a strictly increasing time column"
         )
-    df = _bare(df)
+    df = without_attrs(df)
     req = list(required) if required is not None else []
     missing = [c for c in req if c not in df.columns]
     if missing:
