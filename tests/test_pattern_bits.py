@@ -62,18 +62,33 @@ def test_compiled_chain_equals_numpy(robot, n, numpy_path):
                          numpy_path(K.center_of_mass, robot, p_WB, R_WB, q))
 
 
-def test_compiled_chain_is_used_and_short_trajectories_are_not():
-    q = np.zeros((K._COMPILED_MIN_SAMPLES, 12))
+def test_compiled_chain_is_used_where_exact_and_not_elsewhere(monkeypatch):
+    n = K._COMPILED_MIN_SAMPLES
+    q = np.random.default_rng(4).normal(0.0, 0.5, (n, 12))
+    p = np.zeros((n, 3))
+    # the probe's verdict is what comparing the two paths gives on this machine
+    fast = K._compiled_poses(SURALP, *K._as_traj(p, np.eye(3), n), q)[0]
+    slow = K._numpy_poses(SURALP, *K._as_traj(p, np.eye(3), n), q)
+    same = all(_same(fast[k][i], slow[k][i]) for k in slow for i in (0, 1))
+    assert K._probe_same_bits() == same
+    # the compiled path returns views of one (nb, T, 3) block, numpy's separate arrays
     poses = K.body_poses(SURALP, np.zeros(3), np.eye(3), q)
-    # the compiled path returns views of one (nb, T, 3) block; numpy's separate arrays
-    assert poses["r_foot"][0].base is not None
-    short = K.body_poses(SURALP, np.zeros(3), np.eye(3), q[:-1])
-    assert short["r_foot"][0].base is None
-    # whatever the inputs' layout, one compiled signature (no second compilation)
+    assert (poses["r_foot"][0].base is not None) == K._use_compiled(n)
+    assert K.body_poses(SURALP, np.zeros(3), np.eye(3), q[:-1])["r_foot"][0].base is None
+    monkeypatch.setattr(K, "_COMPILED_SAME_BITS", False)  # a machine that multiplies otherwise
+    assert K.body_poses(SURALP, np.zeros(3), np.eye(3), q)["r_foot"][0].base is None
+    assert _same(K.center_of_mass(SURALP, p, np.eye(3), q), K._numpy_com(SURALP, slow))
+
+
+def test_one_compiled_signature_whatever_the_layout():
     from grfguard.kernels import chain
 
-    K.center_of_mass(SURALP, np.zeros((q.shape[0], 3)), np.eye(3), q)
-    K.body_poses(SURALP, np.zeros((q.shape[0], 3))[:, ::-1], rot_z(0.1), q)
+    n = K._COMPILED_MIN_SAMPLES
+    q = np.zeros((n, 12))
+    K._compiled_poses(SURALP, *K._as_traj(np.zeros(3), np.eye(3), n), q)
+    K._compiled_poses(SURALP, *K._as_traj(np.zeros((n, 3))[:, ::-1], rot_z(0.1), n), q)
+    _, p0, R0, P, R = K._compiled_poses(SURALP, *K._as_traj(np.zeros((n, 3)), np.eye(3), n), q)
+    K._compiled_com(SURALP, p0, R0, P, R)
     chain.warm()
     assert len(chain.chain_poses.signatures) == 1
     assert len(chain.chain_com.signatures) == 1

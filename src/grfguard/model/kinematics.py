@@ -205,8 +205,16 @@ def body_poses(
         raise ConfigError(f"q must have 12 columns (JOINT_NAMES order), got shape {q.shape}")
     one_R = np.ndim(R_WB) == 2
     p_WB, R_WB = _as_traj(p_WB, R_WB, q.shape[0])
-    if one_R and q.shape[0] >= _COMPILED_MIN_SAMPLES:
+    if one_R and _use_compiled(q.shape[0]):
         return _compiled_poses(robot, p_WB, R_WB, q)[0]
+    return _numpy_poses(robot, p_WB, R_WB, q)
+
+
+def _numpy_poses(
+    robot: RobotConfig, p_WB: np.ndarray, R_WB: np.ndarray, q: np.ndarray
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """:func:`body_poses` by stacked numpy products (``p_WB``, ``R_WB`` as
+    :func:`_as_traj` gives them)."""
     from grfguard.model.robot import JOINT_NAMES
 
     col = {j: i for i, j in enumerate(JOINT_NAMES)}
@@ -219,10 +227,58 @@ def body_poses(
     return poses
 
 
+def _numpy_com(robot: RobotConfig, poses: dict[str, tuple[np.ndarray, np.ndarray]]
+               ) -> np.ndarray:
+    """:func:`center_of_mass` of numpy's poses."""
+    total = 0.0
+    acc = 0.0
+    for spec in body_layout(robot):
+        p, R = poses[spec.name]
+        acc = acc + spec.mass * (p + R @ np.asarray(spec.com_in_body))
+        total += spec.mass
+    return acc / total
+
+
 #: Trajectories of at least this many samples (with one trunk orientation) take the
 #: compiled path (:mod:`grfguard.kernels.chain`, same values to the bit); shorter ones
 #: numpy's (numba's import and cache load cost more than they save there).
 _COMPILED_MIN_SAMPLES = 256
+
+#: Whether the compiled path gives numpy's bits on this machine (None: not probed yet).
+_COMPILED_SAME_BITS: bool | None = None
+
+
+def _use_compiled(n: int) -> bool:
+    """True for ``n`` samples when the compiled path is both worth it and exact here.
+
+    The kernels do numpy's arithmetic in numpy's order as this machine's numpy does it
+    (fused multiply-adds in its BLAS products). Another CPU or BLAS may multiply
+    otherwise; then the simulation would still run, but its plans would differ from
+    numpy's in the last bits. So the first call compares the two paths once on a random
+    trajectory of the reference robot (a few ms) and keeps numpy's where they differ."""
+    global _COMPILED_SAME_BITS
+    if n < _COMPILED_MIN_SAMPLES:
+        return False
+    if _COMPILED_SAME_BITS is None:
+        _COMPILED_SAME_BITS = _probe_same_bits()
+    return _COMPILED_SAME_BITS
+
+
+def _probe_same_bits() -> bool:
+    rng = np.random.default_rng(0)
+    n = _COMPILED_MIN_SAMPLES
+    robot = RobotConfig()
+    q = rng.normal(0.0, 0.5, (n, 12))
+    for p_WB, R_WB in ((rng.normal(0.0, 0.3, (n, 3)), np.eye(3)),
+                       (rng.normal(0.0, 0.3, 3), rot_z(0.3) @ rot_x(-0.2))):
+        p, R = _as_traj(p_WB, R_WB, n)
+        fast, p0, R0, P, Rs = _compiled_poses(robot, p, R, q)
+        slow = _numpy_poses(robot, p, R, q)
+        if not all(np.array_equal(fast[k][i], slow[k][i]) for k in slow for i in (0, 1)):
+            return False
+        if not np.array_equal(_compiled_com(robot, p0, R0, P, Rs), _numpy_com(robot, slow)):
+            return False
+    return True
 
 
 def _compiled_poses(
@@ -278,21 +334,20 @@ def center_of_mass(
         q: Joint angles [rad], (T, 12) or (12,), JOINT_NAMES order.
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    if np.ndim(R_WB) == 2 and q.shape[0] >= _COMPILED_MIN_SAMPLES and q.shape[1] == 12:
-        from grfguard.kernels.chain import chain_com
-
+    if np.ndim(R_WB) == 2 and q.shape[1] == 12 and _use_compiled(q.shape[0]):
         p_WB, R_WB = _as_traj(p_WB, R_WB, q.shape[0])
         _, p0, R0, P, R = _compiled_poses(robot, p_WB, R_WB, q)
-        specs = body_layout(robot)
-        out = np.empty((q.shape[0], 3))
-        chain_com(p0, R0, np.array([sp.mass for sp in specs]),
-                  np.array([sp.com_in_body for sp in specs], dtype=float), P, R, out)
-        return out
-    poses = body_poses(robot, p_WB, R_WB, q)
-    total = 0.0
-    acc = 0.0
-    for spec in body_layout(robot):
-        p, R = poses[spec.name]
-        acc = acc + spec.mass * (p + R @ np.asarray(spec.com_in_body))
-        total += spec.mass
-    return acc / total
+        return _compiled_com(robot, p0, R0, P, R)
+    return _numpy_com(robot, body_poses(robot, p_WB, R_WB, q))
+
+
+def _compiled_com(robot: RobotConfig, p0: np.ndarray, R0: np.ndarray, P: np.ndarray,
+                  R: np.ndarray) -> np.ndarray:
+    """:func:`center_of_mass` of :func:`_compiled_poses`'s arrays."""
+    from grfguard.kernels.chain import chain_com
+
+    specs = body_layout(robot)
+    out = np.empty((P.shape[1], 3))
+    chain_com(p0, R0, np.array([sp.mass for sp in specs]),
+              np.array([sp.com_in_body for sp in specs], dtype=float), P, R, out)
+    return out
