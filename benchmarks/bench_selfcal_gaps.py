@@ -60,7 +60,9 @@ READING = (
     "the offset the left sole's twist mode is eight times the exact model's (0.016 of the "
     "weight), without it the exact model's, and the robot is at 1.55x / 1.92x (under the "
     'bound on both seeds). The 2 % of leg mass moved to the trunk interacts with it: '
-    'without that gap the ratio rises to 2.52x / 3.02x (not looked into). The gaps the '
+    "without that gap the ratio rises to 2.52x / 3.02x (its soles' centres of pressure sit "
+    'further off: section "Model self-calibration: where the centres of pressure sit"). The '
+    'gaps the '
     'calibration fits (mass, IMU mounting, gyro and accelerometer biases, load-cell gains '
     'and zeros) move the threshold by 1.2 % or less; the encoder offsets and sensor '
     'positions, not fitted, by up to 3-4 % (seed 1: 1.96x and 1.94x without each).'
