@@ -14,8 +14,9 @@ the order numpy's products use, so the values are the same to the bit:
   small ``gemv``); a broadcast matrix times a vector (numpy's loop without BLAS):
   ``(a0 v0 + a1 v1) + a2 v2``.
 
-``tests/test_kernels_chain.py`` checks every output against the numpy path bit for bit;
-a machine whose numpy multiplies otherwise gets values within rounding of it.
+``tests/test_pattern_bits.py`` checks every output against the numpy path bit for bit.
+Another CPU or BLAS may order numpy's products otherwise: the planner compares both paths
+once per process (``grfguard.model.kinematics._use_compiled``) and keeps numpy's there.
 """
 
 from __future__ import annotations

@@ -105,7 +105,8 @@ def leg_ik(
     """
     _check_side(side)
     # an upright pelvis or a flat sole (the pattern generator's usual case): the products
-    # with the identity are left out (same values: BENCHMARKS.md "Simulation speed")
+    # with the identity are left out (same values: BENCHMARKS.md "Simulation speed: the
+    # pattern generator")
     upright, flat = _is_identity(R_WB), _is_identity(R_WS)
     p_WB, R_WB = _as_traj(p_WB, R_WB)
     p_WS, R_WS = _as_traj(p_WS, R_WS, p_WB.shape[0])
