@@ -32,7 +32,8 @@ lint: $(STAMP)
 # Speed benchmarks (not part of `make test`): pinned to one core when taskset exists; each
 # script rewrites its own BENCHMARKS.md section with machine information and the ratios to
 # the plain references timed in the same run. `make bench-all` runs every benchmark.
-BENCH_SPEED ?= benchmarks/bench_kernels.py benchmarks/bench_compiled_monitor.py
+BENCH_SPEED ?= benchmarks/bench_kernels.py benchmarks/bench_compiled_monitor.py \
+	benchmarks/bench_run_cli.py benchmarks/bench_sim.py
 PIN := $(shell command -v taskset >/dev/null 2>&1 && echo "taskset -c 1")
 
 bench: $(STAMP)

@@ -236,6 +236,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-taskset", action="store_true")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--write", action="store_true",
+                    help="update BENCHMARKS.md (the default; for `make bench`)")
     ap.add_argument("--check", action="store_true",
                     help="Also compare the command's output with write_log(Monitor.run(log)) "
                     "(the output-frame path), column by column, bit for bit.")

@@ -77,6 +77,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=60.0, help="walk length [s]")
     ap.add_argument("--repeat", type=int, default=3, help="best of N runs")
     ap.add_argument("--no-write", action="store_true", help="do not touch BENCHMARKS.md")
+    ap.add_argument("--write", action="store_true",
+                    help="update BENCHMARKS.md (the default; for `make bench`)")
     args = ap.parse_args()
     d = args.duration
     walks = [
