@@ -13,6 +13,7 @@ __all__ = [
     "rot_y",
     "rot_z",
     "rot_axis",
+    "axis_index",
     "quat_to_matrix",
     "rotation_to_quat",
 ]
@@ -46,12 +47,17 @@ def rot_z(angle: np.ndarray | float) -> np.ndarray:
     return _rot(angle, 0, 1)
 
 
+def axis_index(axis: tuple[float, float, float]) -> int:
+    """0, 1, 2 for the coordinate axis ``(1, 0, 0)``, ``(0, 1, 0)``, ``(0, 0, 1)``."""
+    units = {(1.0, 0.0, 0.0): 0, (0.0, 1.0, 0.0): 1, (0.0, 0.0, 1.0): 2}
+    if tuple(axis) not in units:
+        raise ValueError(f"unsupported joint axis {axis}")
+    return units[tuple(axis)]
+
+
 def rot_axis(axis: tuple[float, float, float], angle: np.ndarray | float) -> np.ndarray:
     """Rotation about a coordinate axis ``(1, 0, 0)``, ``(0, 1, 0)`` or ``(0, 0, 1)``."""
-    fns = {(1.0, 0.0, 0.0): rot_x, (0.0, 1.0, 0.0): rot_y, (0.0, 0.0, 1.0): rot_z}
-    if tuple(axis) not in fns:
-        raise ValueError(f"unsupported joint axis {axis}")
-    return fns[tuple(axis)](angle)
+    return (rot_x, rot_y, rot_z)[axis_index(axis)](angle)
 
 
 def quat_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:

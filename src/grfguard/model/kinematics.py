@@ -21,9 +21,9 @@ import numpy as np
 from grfguard.errors import ConfigError
 from grfguard.model.mjcf import body_layout
 from grfguard.model.robot import SIDES, RobotConfig
+from grfguard.rotations import axis_index, rot_x, rot_y, rot_z, rotation_to_quat
 from grfguard.rotations import quat_to_matrix as quat_to_rotation
 from grfguard.rotations import rot_axis as _rot_axis
-from grfguard.rotations import rot_x, rot_y, rot_z, rotation_to_quat
 
 __all__ = [
     "rot_x",
@@ -307,20 +307,12 @@ def _compiled_poses(
     chain_poses(
         p0, R0, np.array([0] + [names.index(sp.parent) for sp in specs[1:]], dtype=np.int64),
         np.array([(0.0, 0.0, 0.0)] + [sp.pos_in_parent for sp in specs[1:]], dtype=float),
-        np.array([0] + [_axis_index(sp.axis) for sp in specs[1:]], dtype=np.int64),
+        np.array([0] + [axis_index(sp.axis) for sp in specs[1:]], dtype=np.int64),
         C, S, P, R,
     )
     poses = {"trunk": (p_WB, R_WB)}
     poses.update((sp.name, (P[b], R[b])) for b, sp in enumerate(specs) if b)
     return poses, p0, R0, P, R
-
-
-def _axis_index(axis: tuple[float, float, float]) -> int:
-    """0, 1, 2 for the unit x, y, z axis (what :func:`grfguard.rotations.rot_axis` takes)."""
-    units = {(1.0, 0.0, 0.0): 0, (0.0, 1.0, 0.0): 1, (0.0, 0.0, 1.0): 2}
-    if tuple(axis) not in units:
-        raise ValueError(f"unsupported joint axis {axis}")
-    return units[tuple(axis)]
 
 
 def center_of_mass(
