@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 HEADER = "## Reality gap without calibration"
+HEADER_BALANCED = "## Reality gap without calibration: robots walking balanced"
 GAPS = ("exact", "mass_plus5", "mass_minus5", "com_x", "com_y", "imu_roll", "imu_pitch",
         "gyro_bias", "acc_bias", "vibration", "encoders", "gains", "zeros", "all")
 BOUNDS = {"r1": 0.2, "r2": 0.5, "r3": 1.0, "r4": 0.5}
@@ -40,17 +41,21 @@ LADDER = {  # (offset on r2 [N], drift on l3 [N/s], gain on r4)
 }
 
 
-def _gap(name: str):
+def _gap(name: str, controller: str = "open_loop"):
+    import dataclasses
+
     from grfguard.sim.reality import load_reality
 
-    return None if name == "exact" else load_reality(name)
+    if name == "exact":
+        return None
+    return dataclasses.replace(load_reality(name), controller=controller)
 
 
-def _walk(name: str, duration: float, seed: int):
+def _walk(name: str, duration: float, seed: int, controller: str = "open_loop"):
     from grfguard.sim import GaitConfig, NoiseConfig, simulate
 
     return simulate(gait=GaitConfig(duration=duration), noise=NoiseConfig(), seed=seed,
-                    reality=_gap(name))
+                    reality=_gap(name, controller))
 
 
 def _monitor(log, common_mode: bool):
@@ -60,10 +65,11 @@ def _monitor(log, common_mode: bool):
     return Monitor.for_log(log) if common_mode else Monitor.for_log(log, common_mode=False)
 
 
-def fault_free(name: str, duration: float, common_mode: bool) -> dict:
+def fault_free(name: str, duration: float, common_mode: bool,
+               controller: str = "open_loop") -> dict:
     from grfguard.model.robot import SENSOR_NAMES
 
-    log = _walk(name, duration, 1)
+    log = _walk(name, duration, 1, controller)
     t0 = time.perf_counter()
     out = _monitor(log, common_mode).run(log)
     run_s = time.perf_counter() - t0
@@ -79,12 +85,13 @@ def fault_free(name: str, duration: float, common_mode: bool) -> dict:
             "run_s": run_s}
 
 
-def scenario(name: str, duration: float, common_mode: bool) -> dict:
+def scenario(name: str, duration: float, common_mode: bool,
+             controller: str = "open_loop") -> dict:
     from grfguard.demo import PAPER_FAULTS
     from grfguard.evaluate.detection import evaluate_detection
     from grfguard.faults import inject_faults, parse_fault_spec
 
-    walk = _walk(name, duration, 0)
+    walk = _walk(name, duration, 0, controller)
     faulty = inject_faults(walk, [parse_fault_spec(s) for s in PAPER_FAULTS], seed=0)
     out = _monitor(faulty, common_mode).run(faulty)
     det = evaluate_detection(faulty, out)
@@ -103,11 +110,11 @@ def scenario(name: str, duration: float, common_mode: bool) -> dict:
     return res
 
 
-def ladder(name: str, common_mode: bool) -> dict:
+def ladder(name: str, common_mode: bool, controller: str = "open_loop") -> dict:
     from grfguard.evaluate.detection import evaluate_detection
     from grfguard.faults import inject_faults, parse_fault_spec
 
-    walk = _walk(name, 12.0, 3)
+    walk = _walk(name, 12.0, 3, controller)
     found = {"offset": None, "drift": None, "gain": None}
     for k in range(len(LADDER["offset"])):
         o, d, g = (LADDER[key][k] for key in ("offset", "drift", "gain"))
@@ -125,11 +132,11 @@ def ladder(name: str, common_mode: bool) -> dict:
 
 
 def one_gap(args: tuple) -> tuple:
-    name, duration, scen_duration, common_mode, with_ladder = args
+    name, duration, scen_duration, common_mode, with_ladder, controller = args
     t0 = time.perf_counter()
-    ff = fault_free(name, duration, common_mode)
-    sc = scenario(name, scen_duration, common_mode)
-    ld = ladder(name, common_mode) if with_ladder else None
+    ff = fault_free(name, duration, common_mode, controller)
+    sc = scenario(name, scen_duration, common_mode, controller)
+    ld = ladder(name, common_mode, controller) if with_ladder else None
     return name, ff, sc, ld, time.perf_counter() - t0
 
 
@@ -168,30 +175,40 @@ def main() -> None:
     ap.add_argument("--ladder", action="store_true")
     ap.add_argument("--only-ladder", action="store_true",
                     help="print only the smallest detected offset / drift / gain per gap")
+    ap.add_argument("--controller", choices=("open_loop", "balanced"), default="open_loop",
+                    help="the simulated robots' walking controller (RealityGap.controller);"
+                         " 'balanced' writes its own section")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     cm = not args.off
+    balanced = args.controller == "balanced"
+    header = HEADER_BALANCED if balanced else HEADER
     t0 = time.perf_counter()
     if args.only_ladder:
         for g in args.gaps:
-            print(f"| {g} | {_fmt_ladder(ladder(g, cm))} |", flush=True)
+            print(f"| {g} | {_fmt_ladder(ladder(g, cm, args.controller))} |", flush=True)
         print(f"runtime {time.perf_counter() - t0:.0f} s")
         return
-    work = [(g, args.duration, args.scenario_duration, cm, args.ladder) for g in args.gaps]
+    work = [(g, args.duration, args.scenario_duration, cm, args.ladder, args.controller)
+            for g in args.gaps]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as ex:
             results = list(ex.map(one_gap, work))
     else:
         results = [one_gap(w) for w in work]
+    gap_list = "" if args.gaps == list(GAPS) else " --gaps " + " ".join(args.gaps)
     lines = [
-        HEADER,
+        header,
         "",
         f"`python benchmarks/bench_reality_nocal.py --duration {args.duration:g} "
-        f"--scenario-duration {args.scenario_duration:g} --jobs {args.jobs}"
+        f"--scenario-duration {args.scenario_duration:g} --jobs {args.jobs}{gap_list}"
+        f"{' --controller balanced' if balanced else ''}"
         f"{' --off' if args.off else ''}{' --ladder' if args.ladder else ''} --write` "
         f"(`Monitor.for_log(log{'' if cm else ', common_mode=False'})`, the default "
         f"monitor{'' if cm else ' without its system layer'}, compiled; default "
         "thresholds, no calibration; "
+        + ("the gaps' robots walk balanced (`controller = \"balanced\"`: the walk planned "
+           "on the true body); " if balanced else "") +
         f"gap files in `grfguard/data/reality/`). Fault-free: a {args.duration:g} s walk, "
         "seed 1: healthy sensors flagged (share of the walk flagged), share of the walk with "
         "`model_mismatch` and its last reason. Paper scenario (r1 frozen at 0 / r2 +100 N / "
@@ -221,8 +238,8 @@ def main() -> None:
     if args.write:
         p = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
         old = p.read_text()
-        if HEADER in old:
-            head, _, tail = old.partition(HEADER)
+        if header + "\n" in old:
+            head, _, tail = old.partition(header + "\n")
             nxt = tail.find("\n## ")
             old = head.rstrip() + "\n" + (tail[nxt:] if nxt >= 0 else "")
         p.write_text(old.rstrip() + "\n\n" + text)

@@ -8,7 +8,8 @@ force over 20 N): each stance sole's mean centre of pressure relative to the sol
 the RMS of its twist ``T = f1 - f2 - f3 + f4`` and the mean of ``P R / S`` (``P`` front
 minus rear, ``R`` left minus right, ``S`` the sole's load), which drives that twist on
 MuJoCo's soft contact (BENCHMARKS.md "Model self-calibration: contact twist"). The seed
-draws sensor noise only: the physics, hence this table, is the same for every seed.
+draws sensor noise only: the physics, hence this table, is the same for every seed. The
+last robot is the first walking balanced: its walk planned on its true body.
 
 Usage: ``.venv/bin/python benchmarks/bench_twist_cop.py``
 """
@@ -52,6 +53,8 @@ def main() -> None:
             dataclasses.replace(gap, trunk_mass_fraction_delta=0.0),
         "every gap but `trunk_com_offset_m`":
             dataclasses.replace(gap, trunk_com_offset_m=(0.0, 0.0, 0.0)),
+        "every gap, walking balanced (`controller = \"balanced\"`)":
+            dataclasses.replace(gap, controller="balanced"),
     }
     print("| robot | sole | CoP x [cm] | CoP y [cm] | twist RMS [N] | mean P R / S [N] |")
     print("|---|---|---|---|---|---|")

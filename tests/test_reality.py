@@ -3,6 +3,8 @@ log keeps the nominal description, the truth is recorded."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -31,6 +33,7 @@ def test_shipped_gap_files_load_and_round_trip():
         ({"imu_mount_rpy_deg": [1.0, 0.0]}, "imu_mount_rpy_deg"),
         ({"load_cell_gain_error": -0.1}, "load_cell_gain_error"),
         ({"seed": 1.5}, "seed"),
+        ({"controller": "stabilised"}, "controller"),
     ],
 )
 def test_bad_gap_values_name_the_field(kwargs, word):
@@ -83,3 +86,65 @@ def test_vibration_band_rms_follows_the_icub_table():
     assert np.sqrt(np.mean(v[:, 2] ** 2)) == pytest.approx(
         np.sqrt(0.16**2 + 0.27**2 + 0.51**2 + 1.22**2 + 0.67**2), rel=0.1)
     assert np.allclose(v, vibration(n, cref, 1000.0, seed=1))
+
+
+def _single_support_cop_x(df, side: str) -> float:
+    """Mean x of a stance sole's true centre of pressure from the sole centre [m], over
+    planned single support."""
+    other = "l" if side == "r" else "r"
+    ss = (df[f"contact_ref_{side}"] > 0.5) & (df[f"contact_ref_{other}"] < 0.5)
+    return float((df[f"true_cop_{side}_x"] - df[f"true_sole_{side}_x"])[ss].mean())
+
+
+def test_balanced_controller_walks_the_true_body_over_the_soles():
+    """A trunk CoM 3 cm forward: planned on the description (open loop) the soles' centres
+    of pressure sit centimetres forward; planned on the true body they stay near the
+    soles' centres. The log's description and the resolved gap say which it was."""
+    gait = GaitConfig(duration=6.0)
+    com = (0.03, 0.0, 0.0)
+    open_loop = simulate(gait=gait, seed=0, reality=RealityGap(trunk_com_offset_m=com))
+    balanced = simulate(gait=gait, seed=0,
+                        reality=RealityGap(trunk_com_offset_m=com, controller="balanced"))
+    for side in "rl":
+        assert _single_support_cop_x(open_loop, side) > 0.015
+        assert abs(_single_support_cop_x(balanced, side)) < 0.005
+    assert balanced.attrs["reality"]["controller"] == "balanced"
+    assert balanced.attrs["robot"] == open_loop.attrs["robot"]
+    assert balanced.attrs["gait"] == open_loop.attrs["gait"]
+    assert not np.array_equal(balanced["q_r_hip_pitch"], open_loop["q_r_hip_pitch"])
+
+
+def test_balanced_controller_changes_nothing_without_a_body_gap():
+    """Sensor gaps alone leave the true body equal to the description: both controllers
+    give the same log, bit for bit."""
+    gap = RealityGap(load_cell_gain_error=0.05, imu_mount_rpy_deg=(1.0, 0.0, 0.0), seed=3)
+    a = simulate(gait=STAND, seed=0, reality=gap)
+    b = simulate(gait=STAND, seed=0, reality=dataclasses.replace(gap, controller="balanced"))
+    assert a.equals(b)
+    assert RealityGap(controller="balanced").is_exact
+
+
+def test_cli_simulate_controller_option(tmp_path):
+    """``grfguard simulate --reality GAP --controller balanced`` records the controller;
+    ``--controller`` without a gap, a bad value and ``--reality`` on a described robot are
+    refused with a message that says what to do."""
+    from typer.testing import CliRunner
+
+    from grfguard.cli import app
+    from grfguard.io.logio import read_log
+
+    out = tmp_path / "bal.parquet"
+    run = CliRunner().invoke
+    res = run(app, ["simulate", "-o", str(out), "--duration", "3", "--reality", "com_x",
+                    "--controller", "balanced"])
+    assert res.exit_code == 0, res.output
+    assert read_log(out).attrs["reality"]["controller"] == "balanced"
+    for args, words in (
+        (["--controller", "balanced"], "needs a reality gap"),
+        (["--reality", "com_x", "--controller", "closed"], "reality.controller"),
+        (["--robot", "g1", "--reality", "com_x"], "SURALP-type robots only"),
+    ):
+        res = run(app, ["simulate", "-o", str(tmp_path / "x.parquet"), "--duration", "3",
+                        *args])
+        assert res.exit_code != 0 and words in res.output, res.output
+        assert not (tmp_path / "x.parquet").exists()

@@ -49,6 +49,12 @@ def simulate(
     reality: Annotated[
         str | None, typer.Option(help="Reality gap TOML or shipped name (grfguard.sim.reality).")
     ] = None,
+    controller: Annotated[
+        str | None, typer.Option(
+            help="With --reality: the simulated walking controller, open_loop (plan on "
+            "the description) or balanced (plan on the true body); default: the gap "
+            "file's `controller` (open_loop when absent).")
+    ] = None,
     calibration_poses: Annotated[
         bool, typer.Option(
             "--calibration-poses",
@@ -67,16 +73,13 @@ def simulate(
     from grfguard.sim.reality import load_reality
 
     check_seed(seed)
+    gap = _reality_with_controller(load_reality(reality), controller)
     if robot is not None and str(robot) == "suralp":
         robot = None  # SURALP keeps its dedicated simulation
     _check_memory_for(duration)
     if is_described_robot(robot):
-        if calibration_poses:
-            from grfguard.errors import ConfigError
-
-            raise ConfigError(
-                f"--calibration-poses is implemented for SURALP-type robots only, not for "
-                f"{robot}; simulate it without the option")
+        _suralp_type_only(robot, {"--calibration-poses": calibration_poses,
+                                  "--reality": gap is not None})
         check_output(output, inputs=[robot], what="log")
         simulate_described(robot, output, duration, step_length, step_period,
                            double_support, seed, noise, rate)
@@ -100,7 +103,7 @@ def simulate(
             noise=noise_cfg,
             seed=seed,
             progress=lambda f: prog.update(task, completed=f),
-            reality=load_reality(reality),
+            reality=gap,
         )
     if rate != 1000.0:
         from grfguard.sim.wholebody import decimate
@@ -108,6 +111,32 @@ def simulate(
         df = decimate(df, rate)
     write_log(df, output)
     _say(f"wrote {output}: {len(df)} samples, {df['time'].iloc[-1]:.2f} s, robot {rob.name}")
+
+
+def _suralp_type_only(robot: str, given: dict[str, bool]) -> None:
+    """Refuse the options (``{flag: given}``) that only SURALP-type robots support."""
+    from grfguard.errors import ConfigError
+
+    for flag, on in given.items():
+        if on:
+            raise ConfigError(
+                f"{flag} is implemented for SURALP-type robots only, not for {robot}; "
+                "simulate it without the option")
+
+
+def _reality_with_controller(gap: Any, controller: str | None) -> Any:
+    """``gap`` with its walking controller replaced by ``controller`` (when given)."""
+    if controller is None:
+        return gap
+    import dataclasses
+
+    from grfguard.errors import ConfigError
+
+    if gap is None:
+        raise ConfigError(
+            f"--controller {controller} needs a reality gap (--reality NAME or FILE): "
+            "without one the robot is its description and is always planned on it")
+    return dataclasses.replace(gap, controller=controller)
 
 
 #: Peak memory of a simulation per simulated second [bytes] (measured: 132 MB for a 40 s

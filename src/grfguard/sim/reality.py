@@ -41,6 +41,7 @@ from grfguard.errors import ConfigError
 from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, RobotConfig
 
 __all__ = [
+    "CONTROLLERS",
     "ICUB_VIBRATION_BANDS",
     "RealityGap",
     "imu_mount_rotation",
@@ -63,6 +64,9 @@ REALITY_FILES = (
     "mass_plus5", "mass_minus5", "com_x", "com_y", "imu_roll", "imu_pitch", "gyro_bias",
     "acc_bias", "vibration", "encoders", "gains", "zeros", "all",
 )
+
+#: Values of :attr:`RealityGap.controller`.
+CONTROLLERS = ("open_loop", "balanced")
 
 _VEC3 = ("trunk_com_offset_m", "imu_mount_rpy_deg", "gyro_bias_rad_s", "acc_bias_m_s2")
 
@@ -106,6 +110,16 @@ class RealityGap:
         load_cell_zero_n: Bound of each load cell's zero error in [N].
         sensor_position_error_m: Bound of each sensor's x and y position error in [m].
         seed: Seed of the random draws.
+        controller: How the robot's walking controller treats its body (not a gap of
+            the description: what the physics does with it). ``"open_loop"``: the walk
+            is planned on the description and rolled out as planned, so a true body
+            that differs (mass, trunk CoM, mass distribution) walks with its centres of
+            pressure where that error puts them (a trunk CoM 3 cm off: about 2.4 cm off
+            the soles' centres). ``"balanced"``: the walk is planned on the true body, so
+            its CoM follows the planned path over the planned ZMP, as a robot whose
+            balance controller has converged (or was tuned on the hardware) walks; the
+            log's description stays the nominal one. The sensor gaps act the same way
+            under both.
     """
 
     mass_error: float = 0.0
@@ -120,9 +134,15 @@ class RealityGap:
     load_cell_zero_n: float = 0.0
     sensor_position_error_m: float = 0.0
     seed: int = 0
+    controller: str = "open_loop"
 
     def __post_init__(self) -> None:
         o = "reality"
+        if self.controller not in CONTROLLERS:
+            raise ConfigError(
+                f"reality.controller = {self.controller!r} must be one of "
+                f"{', '.join(repr(c) for c in CONTROLLERS)}"
+            )
         check_number(o, "mass_error", self.mass_error, -0.5, 0.5, "")
         check_number(o, "trunk_mass_fraction_delta", self.trunk_mass_fraction_delta,
                      -0.2, 0.2, "")
@@ -184,7 +204,7 @@ class RealityGap:
     @property
     def is_exact(self) -> bool:
         """True when the gap changes nothing."""
-        return self == RealityGap(seed=self.seed)
+        return self == RealityGap(seed=self.seed, controller=self.controller)
 
     # ------------------------------------------------------------------ draws
     def resolve(self) -> dict[str, Any]:
@@ -206,6 +226,11 @@ class RealityGap:
         }
 
     # ------------------------------------------------------------------ physics
+    def planned_robot(self, robot: RobotConfig) -> RobotConfig:
+        """The body the walk is planned on: the description (``controller =
+        "open_loop"``) or the true body (``"balanced"``)."""
+        return self.true_robot(robot) if self.controller == "balanced" else robot
+
     def true_robot(self, robot: RobotConfig) -> RobotConfig:
         """The robot the physics simulates (mass, mass distribution, trunk CoM)."""
         d = self.trunk_mass_fraction_delta

@@ -25,7 +25,7 @@ from grfguard.model.kinematics import quat_to_rotation, rotation_to_quat
 from grfguard.model.mjcf import KV_OVER_KP, actuator_gains, build_model
 from grfguard.model.robot import JOINT_NAMES, SENSOR_NAMES, SIDES, SURALP, RobotConfig
 from grfguard.sim.config import GaitConfig, NoiseConfig
-from grfguard.sim.pattern import SAMPLE_RATE, WalkPlan, plan_walk
+from grfguard.sim.pattern import SAMPLE_RATE, WalkPlan, plan_walk, resolve_gait
 
 __all__ = [
     "SCENARIO",
@@ -251,7 +251,9 @@ def simulate(
         progress: Optional ``callable(fraction_done)`` called with values in [0, 1].
         reality: Optional :class:`grfguard.sim.reality.RealityGap`: the physics and the
             sensors follow the true robot, ``attrs["robot"]`` keeps ``robot`` and
-            ``attrs["reality"]`` records the resolved gap (truth only).
+            ``attrs["reality"]`` records the resolved gap (truth only); its
+            ``controller`` plans the walk on ``robot`` (``"open_loop"``) or on the true
+            body (``"balanced"``).
 
     Returns:
         One row per 1 ms sample. Columns: ``time``, ``imu_acc_*`` (specific force, IMU
@@ -278,7 +280,7 @@ def simulate(
     _check_arguments(robot, gait, noise, seed)
     if progress is not None:
         progress(0.0)
-    plan = plan_walk(robot, gait)
+    plan = _plan(robot, gait, reality)
     if progress is not None:
         progress(0.1)
     true_robot = robot if reality is None else reality.true_robot(robot)
@@ -308,6 +310,14 @@ def simulate(
     if progress is not None:
         progress(1.0)
     return df
+
+
+def _plan(robot: RobotConfig, gait: GaitConfig, reality: Any) -> WalkPlan:
+    """The walk plan: on the description, or on the body ``reality.controller`` names;
+    the gait's robot defaults (CoM height) always come from the description."""
+    if reality is None:
+        return plan_walk(robot, gait)
+    return plan_walk(reality.planned_robot(robot), resolve_gait(robot, gait))
 
 
 def _check_arguments(robot: Any, gait: Any, noise: Any, seed: Any) -> None:
