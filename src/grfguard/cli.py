@@ -689,6 +689,26 @@ def demo(
     run_demo(out_dir, duration=duration, seed=seed, console=console, out=out)
 
 
+# --------------------------------------------------------------------------- warm-up
+@app.command("warm-up")
+@_friendly
+def warm_up_cmd(
+    robot: Annotated[
+        str | None, typer.Option(
+            help="Also a described robot's monitor (talos, g1, or a description file): "
+            "one warms them all.")
+    ] = None,
+) -> None:
+    """Compile (or load from the on-disk cache) the compiled kernels now, so that no log
+    and no live sample pays for it (run it once after installing; about three minutes
+    from an empty cache, half a minute more with --robot)."""
+    from grfguard.kernels import warm_described, warm_up
+
+    _say(f"monitor kernels ready in {warm_up():.1f} s")
+    if robot is not None:
+        _say(f"described-robot kernels ready in {warm_described(robot):.1f} s ({robot})")
+
+
 from grfguard.cli_robot import decimate_cmd, robot_app  # noqa: E402
 
 app.add_typer(robot_app, name="robot")

@@ -357,7 +357,9 @@ class ChannelMonitor:
         log = without_attrs(log)  # pandas deep-copies the metadata on every access
         chans = _channels(log)
         self._check(chans)
-        t = np.ascontiguousarray(log["time"].to_numpy(float))
+        # a writable copy: pandas hands out read-only views, which numba compiles as a
+        # second signature of the kernel (warm() compiles the writable one)
+        t = np.array(log["time"].to_numpy(float), dtype=float, order="C")
         cr, cl = _contact_columns(log)
         self.reset()
         self.channels = chans

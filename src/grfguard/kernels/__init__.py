@@ -6,7 +6,8 @@ as one step function over plain arrays, streamed sample by sample or looped over
   ``update_array``) whenever it covers the settings. ``CompiledVirtualForceSensor`` is
   an old name of that class.
 * :func:`vfs_batch`: compiled ``VirtualForceSensor.for_log(log).run(log)``.
-* :func:`warm_up`: compile or load the cache before the first sample.
+* :func:`warm_up`: compile or load the cache before the first sample;
+  :func:`warm_described` the same for a described robot's monitor (Talos, G1).
 
 Array layouts: :data:`IN_COLUMNS`, :data:`OUT_COLUMNS` (:mod:`grfguard.kernels.vfs`).
 """
@@ -23,9 +24,10 @@ from grfguard.kernels.vfs import (
     vfs_run,
     vfs_step,
 )
-from grfguard.kernels.warmup import warm_up
+from grfguard.kernels.warmup import warm_described, warm_up
 
 __all__ = [
     "TreeModel", "fk_tree", "fk_sites", "IN_COLUMNS", "OUT_COLUMNS",
-    "CompiledVirtualForceSensor", "VFSKernel", "vfs_batch", "vfs_run", "vfs_step", "warm_up",
+    "CompiledVirtualForceSensor", "VFSKernel", "vfs_batch", "vfs_run", "vfs_step",
+    "warm_described", "warm_up",
 ]

@@ -10,10 +10,16 @@ for it.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
-__all__ = ["warm_up"]
+__all__ = ["warm_described", "warm_up"]
+
+#: Seconds of walk :func:`warm_described` simulates (enough for every filter window of
+#: the described-robot path: its Savitzky-Golay windows are 101 samples, the long blend
+#: 1001).
+WARM_DESCRIBED_S = 2.5
 
 
 def warm_up() -> float:
@@ -39,4 +45,38 @@ def warm_up() -> float:
 
     channels.warm()
     savgol.warm()
+    return time.perf_counter() - t0
+
+
+def warm_described(robot: Any) -> float:
+    """Compile or load the kernels of a described robot's monitor (``run_described``:
+    the virtual foot wrenches' filters, kinematics and inverse dynamics, then the
+    channel or corner monitor), by running it on a short simulated walk of that robot.
+
+    Compiled code depends on argument types, not on the robot, so one described robot
+    warms the path for all of them; from an empty cache it takes about half a minute of
+    CPU (BENCHMARKS "Described robots: compiled inverse dynamics"), later a few seconds
+    (the simulation).
+
+    Args:
+        robot: A loaded robot (:func:`grfguard.model.loader.load_model`), a shipped name
+            (``talos``, ``g1``) or a description file.
+
+    Returns:
+        Seconds it took.
+    """
+    t0 = time.perf_counter()
+    from grfguard.estimate.described import run_described
+    from grfguard.model.loader import LoadedRobot
+    from grfguard.sim import NoiseConfig
+    from grfguard.sim.wholebody import scaled_gait, simulate_robot
+
+    if not isinstance(robot, LoadedRobot):
+        from grfguard.model.description import load_description
+        from grfguard.model.loader import load_model
+
+        robot = load_model(load_description(str(robot)))
+    log = simulate_robot(robot, scaled_gait(robot, duration=WARM_DESCRIBED_S), NoiseConfig(),
+                         seed=0)
+    run_described(log, robot=robot)
     return time.perf_counter() - t0
