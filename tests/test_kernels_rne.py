@@ -336,3 +336,69 @@ def test_sincos_within_an_ulp_of_libm() -> None:
     with np.errstate(invalid="ignore"):
         np.testing.assert_array_equal(sn, np.sin(x))
         np.testing.assert_array_equal(cs, np.cos(x))
+
+
+def _hinge_case(name, request):
+    """(model, sole and F/T sites, feet, has F/T) of a shipped robot or the small
+    hinge model."""
+    if name == "hinge_xml":
+        m = mujoco.MjModel.from_xml_string(HINGE_XML)
+        sites = [m.site(s).id for s in ("sole_r", "sole_l", "ft_r", "ft_l")]
+        return m, sites, [m.body("foot_r").id, m.body("foot_l").id], True
+    robot = request.getfixturevalue(name)
+    m = robot.model
+    ft = robot.description.sensing == "ft"
+    sites = [m.site(f"{s}_sole").id for s in SIDES] + (
+        [m.site(f"{s}_ft").id for s in SIDES] if ft else [])
+    return m, sites, [m.body(f.body).id for f in robot.description.feet], ft
+
+
+@pytest.mark.parametrize("name", ["talos", "g1", "hinge_xml"])
+def test_hinge_kernels_lanes_equal_one_sample_at_a_time(name, request) -> None:
+    """:func:`hinge_wrench_batch` and :func:`hinge_frames_batch` run groups of
+    :data:`~grfguard.kernels.lanes.LANES` samples through vector lanes and the rest of a
+    block one by one: a log of random states (several blocks, partial groups, the small
+    model's tree shorter than the lane scratch's header) gives, bit for bit, what each
+    state gives alone (the scalar path, which the MuJoCo tests above check)."""
+    from grfguard.kernels.lanes import LANES
+    from grfguard.kernels.rne import (
+        SC_BLOCK,
+        HingeTree,
+        hinge_frames_batch,
+        hinge_wrench_batch,
+        site_paths,
+    )
+    from grfguard.rotations import quat_to_matrix
+
+    m, sites, feet, ft = _hinge_case(name, request)
+    hinges = list(range(1, m.njnt))
+    ht = HingeTree.from_mujoco(m, {int(m.jnt_qposadr[j]): c for c, j in enumerate(hinges)},
+                               sites, feet)
+    rng = np.random.default_rng(11)
+    T = SC_BLOCK + 3 * LANES + 5
+    states = [_random_state(m, rng) for _ in range(T)]
+    q = np.array([[s[0][m.jnt_qposadr[j]] for j in hinges] for s in states])
+    qd = np.array([[s[1][m.jnt_dofadr[j]] for j in hinges] for s in states])
+    qdd = np.array([[s[2][m.jnt_dofadr[j]] for j in hinges] for s in states])
+    base = (np.array([quat_to_matrix(s[0][3:7]) for s in states]),
+            np.array([s[1][:3] for s in states]), np.array([s[1][3:6] for s in states]),
+            np.array([s[2][:3] for s in states]), np.array([s[2][3:6] for s in states]))
+    W = rng.uniform(0.0, 1.0, (T, 2))
+    g = np.asarray(m.opt.gravity, float)
+    ground, ft_out = np.zeros((T, 2, 6)), np.zeros((T, 2, 6))
+    hinge_wrench_batch(q, qd, qdd, base, W, g, ht.arrays(), ft, ground, ft_out)
+    paths = site_paths(ht)
+    pos, mat = np.zeros((T, len(sites), 3)), np.zeros((T, len(sites), 9))
+    hinge_frames_batch(q, ht.arrays(), paths, pos, mat)
+    for t in range(T):
+        one = slice(t, t + 1)
+        g1_, f1_ = np.zeros((1, 2, 6)), np.zeros((1, 2, 6))
+        hinge_wrench_batch(q[one], qd[one], qdd[one], tuple(np.ascontiguousarray(b[one])
+                                                            for b in base),
+                           W[one], g, ht.arrays(), ft, g1_, f1_)
+        p1, r1 = np.zeros((1, len(sites), 3)), np.zeros((1, len(sites), 9))
+        hinge_frames_batch(q[one], ht.arrays(), paths, p1, r1)
+        assert np.array_equal(ground[t], g1_[0]), t
+        assert np.array_equal(ft_out[t], f1_[0]), t
+        assert np.array_equal(pos[t], p1[0]) and np.array_equal(mat[t], r1[0]), t
+    assert np.isfinite(ground).all() and np.abs(ground).max() > 1.0

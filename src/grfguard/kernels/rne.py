@@ -47,6 +47,7 @@ from grfguard.kernels.fk import (
     fk_sites,
     subtree_com_of,
 )
+from grfguard.kernels.lanes import LANES, lane, lanes2d, lanes_size, splat, vload
 
 __all__ = ["RNEModel", "rne_sample", "sample_wrenches", "wrench_batch", "frames_batch", "new_work",
            "HingeTree", "hinge_wrench_batch", "hinge_frames_batch", "site_paths"]
@@ -804,6 +805,68 @@ def _ht_wrenches(t, w0, w1, Rw, ft, ht, R, X, tot, P, rot, gb, ground, ft_out):
             ft_out[t, i, 3 + a] = -(rot[a] * tq0 + rot[3 + a] * tq1 + rot[6 + a] * tq2)
 
 
+@njit_nort(inline="always")
+def _ht_lanes(t, lt, n, qd, qdd, base, g, ht, SN, CS, L, Rv, Xv, Sv, Vv, Av, Fv, totv, Rs, Xs, Vs,
+              As, tots, P, rot, gb, W, ft, ground, ft_out):
+    """:data:`~grfguard.kernels.lanes.LANES` samples ``t ..`` (block rows ``lt ..`` of
+    ``SN``, ``CS``) at once: the per-body stages of :func:`_ht_sample` (the same
+    functions) on vectors of samples, then each sample's :func:`_ht_wrenches` alone. Each
+    lane computes the scalar path's bits. ``L`` ((4 n + 12) LANES): lane-major scratch;
+    ``Rs``, ``Xs``, ``Vs``, ``As``, ``tots``: one sample's scalar rows."""
+    (parent, B, u, axis, anchor, qcol, q0, mass, com, inertia, foot_bodies,
+     foot_ptr) = ht[:12]
+    site_body = ht[12]
+    for j in range(LANES):  # lane-major copies: angles' cos, sin; rates; base motion
+        _ht_base(t + j, base, g, Rs, Xs, Vs, As)
+        for k in range(6):
+            L[(4 * n + k) * LANES + j] = Vs[0, k]
+            L[(4 * n + 6 + k) * LANES + j] = As[0, k]
+        for i in range(1, n):
+            c = qcol[i]
+            L[i * LANES + j] = CS[(lt + j) * n + i]
+            L[(n + i) * LANES + j] = SN[(lt + j) * n + i]
+            L[(2 * n + i) * LANES + j] = qd[t + j, c] if c >= 0 else 0.0
+            L[(3 * n + i) * LANES + j] = qdd[t + j, c] if c >= 0 else 0.0
+    for k in range(9):
+        Rv[0, k] = splat(1.0 if k % 4 == 0 else 0.0)
+    for k in range(3):
+        Xv[0, k] = splat(0.0)
+    for k in range(6):
+        Vv[0, k] = vload(L, (4 * n + k) * LANES)
+        Av[0, k] = vload(L, (4 * n + 6 + k) * LANES)
+    for i in range(1, n):
+        _ht_pose(i, parent[i], vload(L, i * LANES), vload(L, (n + i) * LANES), B, u, axis,
+                 anchor, Rv, Xv, Sv)
+    for i in range(1, n):
+        _ht_motion(i, parent[i], vload(L, (2 * n + i) * LANES), vload(L, (3 * n + i) * LANES),
+                   Sv, Vv, Av)
+    for i in range(n):
+        _ht_force(i, mass, com, inertia, Rv, Xv, Vv, Av, Fv)
+    for r in range(3):
+        for k in range(6):
+            totv[r, k] = splat(0.0)
+    for i in range(n):
+        for k in range(6):
+            totv[0, k] += Fv[i, k]
+    for f in range(foot_ptr.shape[0] - 1):
+        for m in range(foot_ptr[f], foot_ptr[f + 1]):
+            i = foot_bodies[m]
+            for k in range(6):
+                totv[1 + f, k] += Fv[i, k]
+    for j in range(LANES):
+        for s in range(site_body.shape[0]):
+            b = site_body[s]
+            for k in range(9):
+                Rs[b, k] = lane(Rv[b, k], j)
+            for k in range(3):
+                Xs[b, k] = lane(Xv[b, k], j)
+        for r in range(3):
+            for k in range(6):
+                tots[r, k] = lane(totv[r, k], j)
+        _ht_wrenches(t + j, W[t + j, 0], W[t + j, 1], base[0][t + j], ft, ht, Rs, Xs, tots,
+                     P, rot, gb, ground, ft_out)
+
+
 @njit
 def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
     """Ground wrenches ``ground`` (T, 2, 6) (``[force; torque]`` at the soles, world
@@ -814,24 +877,39 @@ def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
     ``base``: ``(R_WB (T, 3, 3), v_B, omega_B, a_B, alpha_B (T, 3))`` (see
     :func:`_ht_sample`); ``g`` (3,) gravity. Base at the origin; the arithmetic is in
     base axes about the base origin (one kinematics and dynamics pass over the moving
-    bodies), the same physics as :func:`rne_sample` and :func:`sample_wrenches`."""
+    bodies), the same physics as :func:`rne_sample` and :func:`sample_wrenches`.
+    Samples go :data:`~grfguard.kernels.lanes.LANES` at a time through vector lanes
+    (:func:`_ht_lanes`), the last few of a block one by one; the bits are the same."""
     n = ht[0].shape[0]
     R, X, S, V, A = (np.empty((n, 9)), np.empty((n, 3)), np.empty((n, 6)), np.empty((n, 6)),
                      np.empty((n, 6)))
     Fb, tot, P, rot, gb = (np.empty((n, 6)), np.empty((3, 6)), np.empty((4, 3)), np.empty(9),
                            np.empty((2, 6)))
+    # the vector arrays borrow these buffers (kept alive by the last statement)
+    bR, bX, bS = np.empty(lanes_size(n, 9)), np.empty(lanes_size(n, 3)), np.empty(lanes_size(n, 6))
+    bV, bA, bF = np.empty(lanes_size(n, 6)), np.empty(lanes_size(n, 6)), np.empty(lanes_size(n, 6))
+    btot = np.empty(lanes_size(3, 6))
+    Rv, Xv, Sv = lanes2d(bR, n, 9), lanes2d(bX, n, 3), lanes2d(bS, n, 6)
+    Vv, Av, Fv = lanes2d(bV, n, 6), lanes2d(bA, n, 6), lanes2d(bF, n, 6)
+    totv = lanes2d(btot, 3, 6)
+    L = np.empty((4 * n + 12) * LANES)
     every = np.arange(n)
     TH, SN, CS = np.empty(SC_BLOCK * n), np.empty(SC_BLOCK * n), np.empty(SC_BLOCK * n)
     T = q.shape[0]
     for t0 in range(0, T, SC_BLOCK):
         nt = min(SC_BLOCK, T - t0)
         _block_sincos(t0, nt, q, ht[5], ht[6], every, TH, SN, CS)
-        for lt in range(nt):
+        nv = nt - nt % LANES
+        for lt in range(0, nv, LANES):
+            _ht_lanes(t0 + lt, lt, n, qd, qdd, base, g, ht, SN, CS, L, Rv, Xv, Sv, Vv, Av, Fv,
+                      totv, R, X, V, A, tot, P, rot, gb, W, ft, ground, ft_out)
+        for lt in range(nv, nt):
             t = t0 + lt
             _ht_sample(t, qd, qdd, base, g, ht, SN[lt * n:(lt + 1) * n],
                        CS[lt * n:(lt + 1) * n], R, X, S, V, A, Fb, tot)
             _ht_wrenches(t, W[t, 0], W[t, 1], base[0][t], ft, ht, R, X, tot, P, rot, gb,
                          ground, ft_out)
+    bR[0] = bX[0] = bS[0] = bV[0] = bA[0] = bF[0] = btot[0] = 0.0
 
 
 def site_paths(ht: HingeTree) -> np.ndarray:
@@ -851,19 +929,48 @@ def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
     """Poses of the :class:`HingeTree`'s sites in base axes (base at the origin, identity
     attitude) for every row of the joint angles ``q`` (T, nj): ``out_pos`` (T, k, 3),
     ``out_mat`` (T, k, 9) (row-major rotations). ``bodies``: :func:`site_paths` (only
-    these are posed)."""
+    these are posed). Samples go :data:`~grfguard.kernels.lanes.LANES` at a time through
+    vector lanes (the same bits), the last few of a block one by one."""
     parent, B, u, axis, anchor, qcol, q0 = ht[:7]
     site_body, site_pos, site_rot = ht[12], ht[13], ht[14]
     n = parent.shape[0]
     R, X, S = np.zeros((n, 9)), np.zeros((n, 3)), np.empty((n, 6))
     R[0, 0], R[0, 4], R[0, 8] = 1.0, 1.0, 1.0
+    # the vector arrays borrow these buffers (kept alive by the last statement)
+    bR, bX, bS = np.empty(lanes_size(n, 9)), np.empty(lanes_size(n, 3)), np.empty(lanes_size(n, 6))
+    Rv, Xv, Sv = lanes2d(bR, n, 9), lanes2d(bX, n, 3), lanes2d(bS, n, 6)
+    for c in range(9):
+        Rv[0, c] = splat(R[0, c])
+    for c in range(3):
+        Xv[0, c] = splat(0.0)
     k = bodies.shape[0]
+    L = np.empty(2 * k * LANES)
     TH, SN, CS = np.empty(SC_BLOCK * k), np.empty(SC_BLOCK * k), np.empty(SC_BLOCK * k)
     T = q.shape[0]
     for t0 in range(0, T, SC_BLOCK):
         nt = min(SC_BLOCK, T - t0)
         _block_sincos(t0, nt, q, qcol, q0, bodies, TH, SN, CS)
-        for lt in range(nt):
+        nv = nt - nt % LANES
+        for lt in range(0, nv, LANES):
+            for j in range(LANES):
+                for b in range(k):
+                    L[b * LANES + j] = CS[(lt + j) * k + b]
+                    L[(k + b) * LANES + j] = SN[(lt + j) * k + b]
+            for b in range(k):
+                i = bodies[b]
+                _ht_pose(i, parent[i], vload(L, b * LANES), vload(L, (k + b) * LANES), B, u,
+                         axis, anchor, Rv, Xv, Sv)
+            for j in range(LANES):
+                for s in range(site_body.shape[0]):
+                    i = site_body[s]
+                    for c in range(9):
+                        R[i, c] = lane(Rv[i, c], j)
+                    for c in range(3):
+                        X[i, c] = lane(Xv[i, c], j)
+                for s in range(site_body.shape[0]):
+                    _site_pose(s, site_body, site_pos, site_rot, R, X, out_pos[t0 + lt + j, s],
+                               out_mat[t0 + lt + j, s])
+        for lt in range(nv, nt):
             t = t0 + lt
             for b in range(k):
                 i = bodies[b]
@@ -872,6 +979,7 @@ def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
             for s in range(site_body.shape[0]):
                 _site_pose(s, site_body, site_pos, site_rot, R, X, out_pos[t, s],
                            out_mat[t, s])
+    bR[0] = bX[0] = bS[0] = 0.0
 
 
 # ------------------------------------------ described robots: base motion from the soles
