@@ -356,10 +356,11 @@ def _hinge_case(name, request):
 @pytest.mark.parametrize("name", ["talos", "g1", "hinge_xml"])
 def test_hinge_kernels_lanes_equal_one_sample_at_a_time(name, request) -> None:
     """:func:`hinge_wrench_batch` and :func:`hinge_frames_batch` run groups of
-    :data:`~grfguard.kernels.lanes.LANES` samples through vector lanes and the rest of a
-    block one by one: a log of random states (several blocks, partial groups, the small
-    model's tree shorter than the lane scratch's header) gives, bit for bit, what each
-    state gives alone (the scalar path, which the MuJoCo tests above check)."""
+    :data:`~grfguard.kernels.lanes.LANES` samples through vector lanes (a block's last,
+    partial group padded with copies of its last sample): a log of random states
+    (several blocks, a partial group, the small model's tree shorter than the lane
+    scratch's header) gives, bit for bit, what each state gives alone in lane 0, which the
+    MuJoCo tests above check; no sample's lane leaks into another's."""
     from grfguard.kernels.lanes import LANES
     from grfguard.kernels.rne import (
         SC_BLOCK,

@@ -557,6 +557,7 @@ _ROUND = 6755399441055744.0  # 1.5 * 2^52: (x + _ROUND) - _ROUND rounds x to an 
 SINCOS_MAX = 1.0e5
 #: Samples whose joint angles :func:`_block_sincos` takes at once.
 SC_BLOCK = 64
+assert SC_BLOCK % LANES == 0  # whole groups of lanes (the last one padded)
 
 
 @njit_nort(inline="always")
@@ -591,15 +592,20 @@ def sincos_flat(th, m, sn, cs):
 @njit_nort(inline="always")
 def _block_sincos(t0, nt, q, qcol, q0, bodies, TH, SN, CS):
     """Sines and cosines of the joint angles of bodies ``bodies`` (k of them) for the
-    samples ``t0 .. t0 + nt - 1``: entry ``l * k + b`` of ``SN``, ``CS`` (the angle 0 for a
-    body whose joint is not in ``q``)."""
+    samples ``t0 .. t0 + nt - 1``, lane-major for :func:`~grfguard.kernels.lanes.vload`:
+    sample ``t0 + g LANES + j``'s at entry ``(g k + b) LANES + j`` of ``SN``, ``CS`` (the
+    angle 0 for a body whose joint is not in ``q``; lanes past ``nt`` repeat the last
+    sample)."""
     k = bodies.shape[0]
-    for lt in range(nt):
+    ng = (nt + LANES - 1) // LANES
+    for g in range(ng):
         for b in range(k):
             i = bodies[b]
-            j = qcol[i]
-            TH[lt * k + b] = q[t0 + lt, max(j, 0)] - q0[i] if j >= 0 else 0.0
-    sincos_flat(TH, nt * k, SN, CS)
+            c = qcol[i]
+            for j in range(LANES):
+                t = t0 + min(g * LANES + j, nt - 1)
+                TH[(g * k + b) * LANES + j] = q[t, max(c, 0)] - q0[i] if c >= 0 else 0.0
+    sincos_flat(TH, ng * k * LANES, SN, CS)
 
 
 @njit_nort(inline="always")
@@ -696,41 +702,6 @@ def _ht_force(i, mass, com, inertia, R, X, V, A, Fb):
 
 
 @njit_nort(inline="always")
-def _ht_sample(t, qd, qdd, base, g, ht, sn, cs, R, X, S, V, A, Fb, tot):
-    """Kinematics and the subtree forces ``tot`` (3, 6) (the whole tree, foot 0's, foot
-    1's; ``[torque; force]`` about the base origin, base axes) of sample ``t``. ``base``:
-    ``(R_WB, v_B, omega_B, a_B, alpha_B)``, the base's attitude, world linear velocity
-    and acceleration of its origin, body-axes angular velocity and acceleration (MuJoCo's
-    free-joint ``qvel``, ``qacc``); the world accelerates at ``-g``; ``sn``, ``cs``: the
-    sines and cosines of the bodies' joint angles (:func:`_block_sincos`). One pass per stage
-    over the bodies (poses, motions, forces): each body's work is short, so the CPU
-    overlaps the bodies of different branches."""
-    (parent, B, u, axis, anchor, qcol, q0, mass, com, inertia, foot_bodies,
-     foot_ptr) = ht[:12]
-    _ht_base(t, base, g, R, X, V, A)
-    nb = parent.shape[0]
-    for i in range(1, nb):
-        _ht_pose(i, parent[i], cs[i], sn[i], B, u, axis, anchor, R, X, S)
-    for i in range(1, nb):
-        j = qcol[i]
-        w, dw = (qd[t, j], qdd[t, j]) if j >= 0 else (0.0, 0.0)
-        _ht_motion(i, parent[i], w, dw, S, V, A)
-    for i in range(nb):
-        _ht_force(i, mass, com, inertia, R, X, V, A, Fb)
-    for r in range(3):
-        for k in range(6):
-            tot[r, k] = 0.0
-    for i in range(nb):
-        for k in range(6):
-            tot[0, k] += Fb[i, k]
-    for f in range(foot_ptr.shape[0] - 1):
-        for n in range(foot_ptr[f], foot_ptr[f + 1]):
-            i = foot_bodies[n]
-            for k in range(6):
-                tot[1 + f, k] += Fb[i, k]
-
-
-@njit_nort(inline="always")
 def _ht_base(t, base, g, R, X, V, A):
     """The base (body 0): identity pose, velocity ``[omega; R_WB^T v_B]``, spatial
     acceleration ``[alpha; R_WB^T (a_B - g) - omega x v]`` (base axes)."""
@@ -766,8 +737,8 @@ def _site_pose(k, site_body, site_pos, site_rot, R, X, pos, rot):
 @njit_nort(inline="always")
 def _ht_wrenches(t, w0, w1, Rw, ft, ht, R, X, tot, P, rot, gb, ground, ft_out):
     """Sample ``t``'s ground wrench at each sole (world axes) and, when ``ft``, the F/T
-    readings, from :func:`_ht_sample`'s ``tot`` (sites: sole r, sole l, F/T r, F/T l).
-    ``P`` (4, 3), ``rot`` (9,), ``gb`` (2, 6): scratch."""
+    readings, from the subtree forces ``tot`` of :func:`_ht_lanes` (sites: sole r, sole l,
+    F/T r, F/T l). ``P`` (4, 3), ``rot`` (9,), ``gb`` (2, 6): scratch."""
     site_body, site_pos, site_rot = ht[12], ht[13], ht[14]
     F0, F1, F2 = tot[0, 3], tot[0, 4], tot[0, 5]
     for i in range(2):  # the wrench at sole i alone: tau_o - p_i x F (base axes), in world
@@ -806,40 +777,50 @@ def _ht_wrenches(t, w0, w1, Rw, ft, ht, R, X, tot, P, rot, gb, ground, ft_out):
 
 
 @njit_nort(inline="always")
-def _ht_lanes(t, lt, n, qd, qdd, base, g, ht, SN, CS, L, Rv, Xv, Sv, Vv, Av, Fv, totv, Rs, Xs, Vs,
-              As, tots, P, rot, gb, W, ft, ground, ft_out):
-    """:data:`~grfguard.kernels.lanes.LANES` samples ``t ..`` (block rows ``lt ..`` of
-    ``SN``, ``CS``) at once: the per-body stages of :func:`_ht_sample` (the same
-    functions) on vectors of samples, then each sample's :func:`_ht_wrenches` alone. Each
-    lane computes the scalar path's bits. ``L`` ((4 n + 12) LANES): lane-major scratch;
-    ``Rs``, ``Xs``, ``Vs``, ``As``, ``tots``: one sample's scalar rows."""
+def _ht_lanes(t, lt, nreal, n, qd, qdd, base, g, ht, SN, CS, L, vw, sw, W, ft, ground, ft_out):
+    """Samples ``t .. t + nreal - 1`` (``nreal`` <= :data:`~grfguard.kernels.lanes.LANES`)
+    in vector lanes: kinematics and the subtree forces (the whole tree's, foot 0's, foot
+    1's; ``[torque; force]`` about the base origin, base axes) with one pass per stage
+    over the bodies (poses, motions, forces: each body's work is short, so the CPU
+    overlaps the bodies of different branches), then each sample's :func:`_ht_wrenches`
+    alone. Lanes past ``nreal`` repeat the last sample and are not written.
+
+    ``lt``: the samples' first row in the block of ``SN``, ``CS`` (a multiple of LANES;
+    the sines and cosines of the bodies' joint angles, :func:`_block_sincos`). ``base``:
+    ``(R_WB, v_B, omega_B, a_B, alpha_B)``, the base's attitude, world linear velocity and
+    acceleration of its origin, body-axes angular velocity and acceleration (MuJoCo's
+    free-joint ``qvel``, ``qacc``); the world accelerates at ``-g``. ``L`` ((2 n + 12)
+    LANES): lane-major scratch (rates, base motion); ``vw``: the vector arrays ``(R, X,
+    S, V, A, F, tot)``; ``sw``: one sample's scalar rows ``(R, X, V, A, tot)`` and
+    :func:`_ht_wrenches`' scratch ``(P, rot, gb)``."""
     (parent, B, u, axis, anchor, qcol, q0, mass, com, inertia, foot_bodies,
      foot_ptr) = ht[:12]
     site_body = ht[12]
+    Rv, Xv, Sv, Vv, Av, Fv, totv = vw
+    Rs, Xs, Vs, As, tots, P, rot, gb = sw
     for j in range(LANES):  # lane-major copies: angles' cos, sin; rates; base motion
-        _ht_base(t + j, base, g, Rs, Xs, Vs, As)
+        jj = min(j, nreal - 1)
+        _ht_base(t + jj, base, g, Rs, Xs, Vs, As)
         for k in range(6):
-            L[(4 * n + k) * LANES + j] = Vs[0, k]
-            L[(4 * n + 6 + k) * LANES + j] = As[0, k]
+            L[(2 * n + k) * LANES + j] = Vs[0, k]
+            L[(2 * n + 6 + k) * LANES + j] = As[0, k]
         for i in range(1, n):
             c = qcol[i]
-            L[i * LANES + j] = CS[(lt + j) * n + i]
-            L[(n + i) * LANES + j] = SN[(lt + j) * n + i]
-            L[(2 * n + i) * LANES + j] = qd[t + j, c] if c >= 0 else 0.0
-            L[(3 * n + i) * LANES + j] = qdd[t + j, c] if c >= 0 else 0.0
+            L[i * LANES + j] = qd[t + jj, c] if c >= 0 else 0.0
+            L[(n + i) * LANES + j] = qdd[t + jj, c] if c >= 0 else 0.0
     for k in range(9):
         Rv[0, k] = splat(1.0 if k % 4 == 0 else 0.0)
     for k in range(3):
         Xv[0, k] = splat(0.0)
     for k in range(6):
-        Vv[0, k] = vload(L, (4 * n + k) * LANES)
-        Av[0, k] = vload(L, (4 * n + 6 + k) * LANES)
+        Vv[0, k] = vload(L, (2 * n + k) * LANES)
+        Av[0, k] = vload(L, (2 * n + 6 + k) * LANES)
+    g0 = lt // LANES * n
     for i in range(1, n):
-        _ht_pose(i, parent[i], vload(L, i * LANES), vload(L, (n + i) * LANES), B, u, axis,
-                 anchor, Rv, Xv, Sv)
+        _ht_pose(i, parent[i], vload(CS, (g0 + i) * LANES), vload(SN, (g0 + i) * LANES), B, u,
+                 axis, anchor, Rv, Xv, Sv)
     for i in range(1, n):
-        _ht_motion(i, parent[i], vload(L, (2 * n + i) * LANES), vload(L, (3 * n + i) * LANES),
-                   Sv, Vv, Av)
+        _ht_motion(i, parent[i], vload(L, i * LANES), vload(L, (n + i) * LANES), Sv, Vv, Av)
     for i in range(n):
         _ht_force(i, mass, com, inertia, Rv, Xv, Vv, Av, Fv)
     for r in range(3):
@@ -853,18 +834,24 @@ def _ht_lanes(t, lt, n, qd, qdd, base, g, ht, SN, CS, L, Rv, Xv, Sv, Vv, Av, Fv,
             i = foot_bodies[m]
             for k in range(6):
                 totv[1 + f, k] += Fv[i, k]
-    for j in range(LANES):
-        for s in range(site_body.shape[0]):
-            b = site_body[s]
-            for k in range(9):
-                Rs[b, k] = lane(Rv[b, k], j)
-            for k in range(3):
-                Xs[b, k] = lane(Xv[b, k], j)
+    for j in range(nreal):
+        _lane_rows(j, site_body, Rv, Xv, Rs, Xs)
         for r in range(3):
             for k in range(6):
                 tots[r, k] = lane(totv[r, k], j)
         _ht_wrenches(t + j, W[t + j, 0], W[t + j, 1], base[0][t + j], ft, ht, Rs, Xs, tots,
                      P, rot, gb, ground, ft_out)
+
+
+@njit_nort(inline="always")
+def _lane_rows(j, bodies, Rv, Xv, R, X):
+    """Lane ``j`` of the vector rows ``Rv``, ``Xv`` of ``bodies`` into ``R``, ``X``."""
+    for s in range(bodies.shape[0]):
+        b = bodies[s]
+        for k in range(9):
+            R[b, k] = lane(Rv[b, k], j)
+        for k in range(3):
+            X[b, k] = lane(Xv[b, k], j)
 
 
 @njit
@@ -875,16 +862,14 @@ def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
     its :meth:`HingeTree.arrays`, sites sole r, sole l[, F/T r, F/T l]) over a log:
     joint angles ``q``, rates ``qd``, ``qdd`` (T, nj) in the tree's ``qcol`` columns;
     ``base``: ``(R_WB (T, 3, 3), v_B, omega_B, a_B, alpha_B (T, 3))`` (see
-    :func:`_ht_sample`); ``g`` (3,) gravity. Base at the origin; the arithmetic is in
+    :func:`_ht_lanes`); ``g`` (3,) gravity. Base at the origin; the arithmetic is in
     base axes about the base origin (one kinematics and dynamics pass over the moving
     bodies), the same physics as :func:`rne_sample` and :func:`sample_wrenches`.
     Samples go :data:`~grfguard.kernels.lanes.LANES` at a time through vector lanes
-    (:func:`_ht_lanes`), the last few of a block one by one; the bits are the same."""
+    (:func:`_ht_lanes`; each lane computes the bits of scalar code)."""
     n = ht[0].shape[0]
-    R, X, S, V, A = (np.empty((n, 9)), np.empty((n, 3)), np.empty((n, 6)), np.empty((n, 6)),
-                     np.empty((n, 6)))
-    Fb, tot, P, rot, gb = (np.empty((n, 6)), np.empty((3, 6)), np.empty((4, 3)), np.empty(9),
-                           np.empty((2, 6)))
+    R, X, V, A = np.empty((n, 9)), np.empty((n, 3)), np.empty((n, 6)), np.empty((n, 6))
+    tot, P, rot, gb = np.empty((3, 6)), np.empty((4, 3)), np.empty(9), np.empty((2, 6))
     # the vector arrays borrow these buffers (kept alive by the last statement)
     bR, bX, bS = np.empty(lanes_size(n, 9)), np.empty(lanes_size(n, 3)), np.empty(lanes_size(n, 6))
     bV, bA, bF = np.empty(lanes_size(n, 6)), np.empty(lanes_size(n, 6)), np.empty(lanes_size(n, 6))
@@ -892,23 +877,17 @@ def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
     Rv, Xv, Sv = lanes2d(bR, n, 9), lanes2d(bX, n, 3), lanes2d(bS, n, 6)
     Vv, Av, Fv = lanes2d(bV, n, 6), lanes2d(bA, n, 6), lanes2d(bF, n, 6)
     totv = lanes2d(btot, 3, 6)
-    L = np.empty((4 * n + 12) * LANES)
+    vw, sw = (Rv, Xv, Sv, Vv, Av, Fv, totv), (R, X, V, A, tot, P, rot, gb)
+    L = np.empty((2 * n + 12) * LANES)
     every = np.arange(n)
     TH, SN, CS = np.empty(SC_BLOCK * n), np.empty(SC_BLOCK * n), np.empty(SC_BLOCK * n)
     T = q.shape[0]
     for t0 in range(0, T, SC_BLOCK):
         nt = min(SC_BLOCK, T - t0)
         _block_sincos(t0, nt, q, ht[5], ht[6], every, TH, SN, CS)
-        nv = nt - nt % LANES
-        for lt in range(0, nv, LANES):
-            _ht_lanes(t0 + lt, lt, n, qd, qdd, base, g, ht, SN, CS, L, Rv, Xv, Sv, Vv, Av, Fv,
-                      totv, R, X, V, A, tot, P, rot, gb, W, ft, ground, ft_out)
-        for lt in range(nv, nt):
-            t = t0 + lt
-            _ht_sample(t, qd, qdd, base, g, ht, SN[lt * n:(lt + 1) * n],
-                       CS[lt * n:(lt + 1) * n], R, X, S, V, A, Fb, tot)
-            _ht_wrenches(t, W[t, 0], W[t, 1], base[0][t], ft, ht, R, X, tot, P, rot, gb,
-                         ground, ft_out)
+        for lt in range(0, nt, LANES):
+            _ht_lanes(t0 + lt, lt, min(LANES, nt - lt), n, qd, qdd, base, g, ht, SN, CS, L, vw,
+                      sw, W, ft, ground, ft_out)
     bR[0] = bX[0] = bS[0] = bV[0] = bA[0] = bF[0] = btot[0] = 0.0
 
 
@@ -930,11 +909,11 @@ def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
     attitude) for every row of the joint angles ``q`` (T, nj): ``out_pos`` (T, k, 3),
     ``out_mat`` (T, k, 9) (row-major rotations). ``bodies``: :func:`site_paths` (only
     these are posed). Samples go :data:`~grfguard.kernels.lanes.LANES` at a time through
-    vector lanes (the same bits), the last few of a block one by one."""
+    vector lanes (each lane computes the bits of scalar code)."""
     parent, B, u, axis, anchor, qcol, q0 = ht[:7]
     site_body, site_pos, site_rot = ht[12], ht[13], ht[14]
     n = parent.shape[0]
-    R, X, S = np.zeros((n, 9)), np.zeros((n, 3)), np.empty((n, 6))
+    R, X = np.zeros((n, 9)), np.zeros((n, 3))
     R[0, 0], R[0, 4], R[0, 8] = 1.0, 1.0, 1.0
     # the vector arrays borrow these buffers (kept alive by the last statement)
     bR, bX, bS = np.empty(lanes_size(n, 9)), np.empty(lanes_size(n, 3)), np.empty(lanes_size(n, 6))
@@ -944,41 +923,23 @@ def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
     for c in range(3):
         Xv[0, c] = splat(0.0)
     k = bodies.shape[0]
-    L = np.empty(2 * k * LANES)
     TH, SN, CS = np.empty(SC_BLOCK * k), np.empty(SC_BLOCK * k), np.empty(SC_BLOCK * k)
     T = q.shape[0]
     for t0 in range(0, T, SC_BLOCK):
         nt = min(SC_BLOCK, T - t0)
         _block_sincos(t0, nt, q, qcol, q0, bodies, TH, SN, CS)
-        nv = nt - nt % LANES
-        for lt in range(0, nv, LANES):
-            for j in range(LANES):
-                for b in range(k):
-                    L[b * LANES + j] = CS[(lt + j) * k + b]
-                    L[(k + b) * LANES + j] = SN[(lt + j) * k + b]
+        for lt in range(0, nt, LANES):
+            nreal = min(LANES, nt - lt)
+            g0 = lt // LANES * k
             for b in range(k):
                 i = bodies[b]
-                _ht_pose(i, parent[i], vload(L, b * LANES), vload(L, (k + b) * LANES), B, u,
-                         axis, anchor, Rv, Xv, Sv)
-            for j in range(LANES):
-                for s in range(site_body.shape[0]):
-                    i = site_body[s]
-                    for c in range(9):
-                        R[i, c] = lane(Rv[i, c], j)
-                    for c in range(3):
-                        X[i, c] = lane(Xv[i, c], j)
+                _ht_pose(i, parent[i], vload(CS, (g0 + b) * LANES), vload(SN, (g0 + b) * LANES),
+                         B, u, axis, anchor, Rv, Xv, Sv)
+            for j in range(nreal):
+                _lane_rows(j, site_body, Rv, Xv, R, X)
                 for s in range(site_body.shape[0]):
                     _site_pose(s, site_body, site_pos, site_rot, R, X, out_pos[t0 + lt + j, s],
                                out_mat[t0 + lt + j, s])
-        for lt in range(nv, nt):
-            t = t0 + lt
-            for b in range(k):
-                i = bodies[b]
-                _ht_pose(i, parent[i], CS[lt * k + b], SN[lt * k + b], B, u, axis, anchor, R,
-                         X, S)
-            for s in range(site_body.shape[0]):
-                _site_pose(s, site_body, site_pos, site_rot, R, X, out_pos[t, s],
-                           out_mat[t, s])
     bR[0] = bX[0] = bS[0] = 0.0
 
 
