@@ -75,37 +75,26 @@ STAGES = {
 
 #: Analysis written with the figures (by hand; re-runs keep it).
 NOTES = """
-Where the time goes now (Talos, "after" column of the first table; branch `h11talos`,
-"before" = 1e9c789, main at the start of that work): `run_described` 5.6 µs per sample
-(178 k samples/s; 7.6 before in this run, at load 8): the Savitzky-Golay filters 1.7
-(were 2.5: weights cached, each edge fitted once for all orders, outputs written in
-place, the blend's 1001-tap window by FFT); the inverse dynamics 1.9 (was 2.8: the
-joints' sin/cos from a vectorised fdlibm kernel over blocks of 64 samples instead of
-scalar libm calls, 0.6 µs of it); the first kinematics 0.5 (was 0.9: the same sin/cos,
-the products after it compiled); attitude 0.1 and base motion 0.2 (were 0.3 and 0.5:
-compiled with numpy's own operation order, bit-identical); the rest of
-`estimate_wrenches` 0.4; the channel monitor 0.7; the frame assembly of
-`with_described_vfs` 0.05 (was 0.45: one `pd.concat`). Not this work: G1's corner
-monitor + tracking (4.2 -> 2.1: main's compiled monitor loop changed meanwhile, merged
-into the branch, plus the load) and the channel monitor (0.85 -> 0.66: its code did not
-change, the load did); the whole-run rows include those.
+What changed (session 27, 2026-11-27; "before" = main 4e26698): the hinge kernels'
+per-body stages run eight samples at once in vector lanes (`grfguard.kernels.lanes`: a
+numba type for an LLVM `<8 x double>`; the same functions `_ht_pose`, `_ht_motion`,
+`_ht_force` compiled for vectors, each lane the IEEE operations of the scalar code);
+the sines and cosines are written in the lanes' order. numba's own vectoriser had left
+these loops scalar (the bodies' rows share one array, so it cannot prove that a store
+does not alias a later load). Outputs bit-identical (last column: 0); the inverse
+dynamics and the first kinematics about 2x faster, everything else unchanged.
 
-Outputs (last column): 1.9e-12 N (Talos), 3.6e-12 N (G1) against the "before" sources,
-flags and kinds identical. Two changes move the last bits on purpose (OUTPUT-BITS
-commits): the sin/cos kernel (within 1 ulp of libm for joint angles) and the FFT blend
-(within 2e-15 of the signal's scale of the direct sum); everything else is
-bit-identical. `bench_described_monitor.py --clean-walks 10 --no-write`: all 21 rows of
-"Monitoring Talos and G1" identical. The SURALP default monitor (`grfguard demo`) does
-not use these paths.
+Where the Talos sample goes now ("after" column): the inverse dynamics about 0.75 µs
+(of which the per-sample ground and F/T wrenches after the lanes 0.12, gathering the
+rates and the base motion into lanes and the sines and cosines 0.2-0.3, the vector
+stages 0.4), the Savitzky-Golay filters 0.65, the channel monitor 0.6 (its kernel 0.1;
+the output columns, 12 of them text, the rest), the first kinematics 0.2, the rest of
+`estimate_wrenches` with the base motion, attitude and stance weights about 0.6, the
+frame assembly 0.2.
 
 Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
-kinematics included): **not met**: 178 k samples/s for the whole Talos monitor (G1 149
-k); the virtual wrenches alone 207 k (Talos), 234 k (G1). 300 k/s is 3.3 µs per sample;
-left, in order of size: the inverse dynamics (1.9 µs: scalar code, about 11 k flops per
-sample; processing several samples side by side or with the lane index innermost did not
-vectorise under numba here), the filters (1.7: 89 columns x 101 taps in scipy's exact
-order; fusing the tap passes ran 2x slower, not vectorised), the channel monitor 0.7,
-the first kinematics 0.5, the rest 0.8.
+kinematics included): see "Issue 11 status" for the verdict over the session; this run's
+figure is the `run_described` row for Talos.
 """
 
 
