@@ -798,7 +798,7 @@ def _ht_lanes(t, lt, nreal, n, qd, qdd, base, g, ht, SN, CS, L, vw, sw, W, ft, g
     site_body = ht[12]
     Rv, Xv, Sv, Vv, Av, Fv, totv = vw
     Rs, Xs, Vs, As, tots, P, rot, gb = sw
-    for j in range(LANES):  # lane-major copies: angles' cos, sin; rates; base motion
+    for j in range(LANES):  # lane-major copies of the rates and the base motion
         jj = min(j, nreal - 1)
         _ht_base(t + jj, base, g, Rs, Xs, Vs, As)
         for k in range(6):
