@@ -26,6 +26,7 @@ from llvmlite import ir
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic, models, overload, register_jitable, register_model
+from numba.np.arrayobj import make_array, populate_array
 
 LANES = 8
 _LL = ir.VectorType(ir.DoubleType(), LANES)
@@ -62,119 +63,125 @@ def lanes_size(n, m):
     return (n * m + 1) * LANES
 
 
-def _build():
-    from numba.np.arrayobj import make_array, populate_array
+def _is_f64_buffer(buf) -> bool:
+    return (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C"
+            and buf.dtype == types.float64)
+
+
+@intrinsic
+def splat(typingctx, x):
+    """The float ``x`` in every lane."""
+    if not isinstance(x, (types.Float, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return _splat(builder, context.cast(builder, args[0], sig.args[0], types.float64))
+
+    return vec(x), codegen
+
+
+@intrinsic
+def lane(typingctx, v, j):
+    """Lane ``j`` of ``v``."""
+    if not (isinstance(v, VecType) and isinstance(j, types.Integer)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.extract_element(args[0], args[1])
+
+    return types.float64(v, j), codegen
+
+
+@intrinsic
+def vload(typingctx, buf, off):
+    """``buf[off : off + LANES]`` of a 1-D C-contiguous float64 array as a vector (any
+    alignment; bounds are the caller's)."""
+    if not _is_f64_buffer(buf):
+        return None
+
+    def codegen(context, builder, sig, args):
+        a = make_array(sig.args[0])(context, builder, args[0])
+        p = cgutils.gep_inbounds(builder, a.data, args[1])
+        return builder.load(builder.bitcast(p, _LL.as_pointer()), align=8)
+
+    return vec(buf, types.intp), codegen
+
+
+@intrinsic
+def lanes2d(typingctx, buf, n, m):
+    """An (n, m) C-contiguous array of vectors over the float64 1-D buffer ``buf`` (at
+    least :func:`lanes_size` ``(n, m)`` entries), starting at its first entry aligned to a
+    vector's size. Borrowed: no owner, valid while ``buf`` lives; never return it to
+    Python."""
+    if not _is_f64_buffer(buf):
+        return None
+    ret = types.Array(vec, 2, "C")
+
+    def codegen(context, builder, sig, args):
+        src = make_array(sig.args[0])(context, builder, args[0])
+        dst = make_array(ret)(context, builder)
+        i64 = ir.IntType(64)
+        size = LANES * 8
+        addr = builder.ptrtoint(src.data, i64)
+        pad = builder.and_(builder.sub(ir.Constant(i64, 0), addr), ir.Constant(i64, size - 1))
+        data = builder.inttoptr(builder.add(addr, pad), _LL.as_pointer())
+        isz = context.get_constant(types.intp, size)
+        populate_array(dst, data=data, shape=cgutils.pack_array(builder, [args[1], args[2]]),
+                       strides=cgutils.pack_array(builder, [builder.mul(isz, args[2]), isz]),
+                       itemsize=isz, meminfo=None, parent=None)
+        return dst._getvalue()
+
+    return ret(buf, types.intp, types.intp), codegen
+
+
+def _binop(name: str):
+    """The intrinsic of LLVM's ``name`` (``fadd``, ...) on two operands, floats splat."""
 
     @intrinsic
-    def splat(typingctx, x):
-        """The float ``x`` in every lane."""
-        if not isinstance(x, (types.Float, types.Integer)):
-            return None
-
+    def op(typingctx, a, b):
         def codegen(context, builder, sig, args):
-            return _splat(builder, context.cast(builder, args[0], sig.args[0], types.float64))
+            xs = [v if t == vec else _splat(builder, context.cast(builder, v, t, types.float64))
+                  for t, v in zip(sig.args, args, strict=True)]
+            return getattr(builder, name)(xs[0], xs[1])
 
-        return vec(x), codegen
+        return vec(a, b), codegen
 
-    @intrinsic
-    def lane(typingctx, v, j):
-        """Lane ``j`` of ``v``."""
-        if not (isinstance(v, VecType) and isinstance(j, types.Integer)):
-            return None
-
-        def codegen(context, builder, sig, args):
-            return builder.extract_element(args[0], args[1])
-
-        return types.float64(v, j), codegen
-
-    @intrinsic
-    def vload(typingctx, buf, off):
-        """``buf[off : off + LANES]`` of a 1-D C-contiguous float64 array as a vector
-        (any alignment; bounds are the caller's)."""
-        if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C"
-                and buf.dtype == types.float64):
-            return None
-
-        def codegen(context, builder, sig, args):
-            a = make_array(sig.args[0])(context, builder, args[0])
-            p = cgutils.gep_inbounds(builder, a.data, args[1])
-            return builder.load(builder.bitcast(p, _LL.as_pointer()), align=8)
-
-        return vec(buf, types.intp), codegen
-
-    @intrinsic
-    def lanes2d(typingctx, buf, n, m):
-        """An (n, m) C-contiguous array of vectors over the float64 1-D buffer ``buf``
-        (at least :func:`lanes_size` ``(n, m)`` entries), starting at its first entry
-        aligned to a vector's size. Borrowed: no owner, valid while ``buf`` lives; never
-        return it to Python."""
-        if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C"
-                and buf.dtype == types.float64):
-            return None
-        ret = types.Array(vec, 2, "C")
-
-        def codegen(context, builder, sig, args):
-            src = make_array(sig.args[0])(context, builder, args[0])
-            dst = make_array(ret)(context, builder)
-            i64 = ir.IntType(64)
-            size = LANES * 8
-            addr = builder.ptrtoint(src.data, i64)
-            pad = builder.and_(builder.sub(ir.Constant(i64, 0), addr), ir.Constant(i64, size - 1))
-            data = builder.inttoptr(builder.add(addr, pad), _LL.as_pointer())
-            isz = context.get_constant(types.intp, size)
-            populate_array(dst, data=data, shape=cgutils.pack_array(builder, [args[1], args[2]]),
-                           strides=cgutils.pack_array(builder, [builder.mul(isz, args[2]), isz]),
-                           itemsize=isz, meminfo=None, parent=None)
-            return dst._getvalue()
-
-        return ret(buf, types.intp, types.intp), codegen
-
-    def binop(name):
-        @intrinsic
-        def op(typingctx, a, b):
-            def codegen(context, builder, sig, args):
-                xs = [v if t == vec else
-                      _splat(builder, context.cast(builder, v, t, types.float64))
-                      for t, v in zip(sig.args, args, strict=True)]
-                return getattr(builder, name)(xs[0], xs[1])
-
-            return vec(a, b), codegen
-
-        return op
-
-    def scalar(t) -> bool:
-        return isinstance(t, (VecType, types.Float, types.Integer))
-
-    def typed_overload(impl):
-        def ov(a, b):
-            if (isinstance(a, VecType) or isinstance(b, VecType)) and scalar(a) and scalar(b):
-                return lambda a, b: impl(a, b)
-
-        return ov
-
-    for ops, name in (((operator.add, operator.iadd), "fadd"),
-                      ((operator.sub, operator.isub), "fsub"),
-                      ((operator.mul, operator.imul), "fmul"),
-                      ((operator.truediv, operator.itruediv), "fdiv")):
-        ov = typed_overload(binop(name))
-        for o in ops:
-            overload(o)(ov)
-
-    @intrinsic
-    def _neg(typingctx, a):
-        def codegen(context, builder, sig, args):
-            return builder.fneg(args[0])
-
-        return vec(a), codegen
-
-    @overload(operator.neg)
-    def _ov_neg(a):
-        if isinstance(a, VecType):
-            return lambda a: _neg(a)
-
-    return splat, lane, vload, lanes2d
+    return op
 
 
-splat, lane, vload, lanes2d = _build()
+def _operand(t) -> bool:
+    return isinstance(t, (VecType, types.Float, types.Integer))
+
+
+def _overload_of(impl):
+    def ov(a, b):
+        if (isinstance(a, VecType) or isinstance(b, VecType)) and _operand(a) and _operand(b):
+            return lambda a, b: impl(a, b)
+
+    return ov
+
+
+for _ops, _name in (((operator.add, operator.iadd), "fadd"),
+                    ((operator.sub, operator.isub), "fsub"),
+                    ((operator.mul, operator.imul), "fmul"),
+                    ((operator.truediv, operator.itruediv), "fdiv")):
+    _ov = _overload_of(_binop(_name))
+    for _o in _ops:
+        overload(_o)(_ov)
+
+
+@intrinsic
+def _neg(typingctx, a):
+    def codegen(context, builder, sig, args):
+        return builder.fneg(args[0])
+
+    return vec(a), codegen
+
+
+@overload(operator.neg)
+def _ov_neg(a):
+    if isinstance(a, VecType):
+        return lambda a: _neg(a)
+
 
 __all__ = ["LANES", "vec", "VecType", "lanes_size", "splat", "lane", "vload", "lanes2d"]
