@@ -808,11 +808,7 @@ def _ht_lanes(t, lt, nreal, n, qd, qdd, base, g, ht, SN, CS, L, vw, sw, W, ft, g
             c = qcol[i]
             L[i * LANES + j] = qd[t + jj, c] if c >= 0 else 0.0
             L[(n + i) * LANES + j] = qdd[t + jj, c] if c >= 0 else 0.0
-    for k in range(9):
-        Rv[0, k] = splat(1.0 if k % 4 == 0 else 0.0)
-    for k in range(3):
-        Xv[0, k] = splat(0.0)
-    for k in range(6):
+    for k in range(6):  # the base: its pose (identity) is set once by the caller
         Vv[0, k] = vload(L, (2 * n + k) * LANES)
         Av[0, k] = vload(L, (2 * n + 6 + k) * LANES)
     g0 = lt // LANES * n
@@ -877,6 +873,10 @@ def hinge_wrench_batch(q, qd, qdd, base, W, g, ht, ft, ground, ft_out):
     Rv, Xv, Sv = lanes2d(bR, n, 9), lanes2d(bX, n, 3), lanes2d(bS, n, 6)
     Vv, Av, Fv = lanes2d(bV, n, 6), lanes2d(bA, n, 6), lanes2d(bF, n, 6)
     totv = lanes2d(btot, 3, 6)
+    for k in range(9):
+        Rv[0, k] = splat(1.0 if k % 4 == 0 else 0.0)
+    for k in range(3):
+        Xv[0, k] = splat(0.0)
     vw, sw = (Rv, Xv, Sv, Vv, Av, Fv, totv), (R, X, V, A, tot, P, rot, gb)
     L = np.empty((2 * n + 12) * LANES)
     every = np.arange(n)
@@ -919,7 +919,7 @@ def hinge_frames_batch(q, ht, bodies, out_pos, out_mat):
     bR, bX, bS = np.empty(lanes_size(n, 9)), np.empty(lanes_size(n, 3)), np.empty(lanes_size(n, 6))
     Rv, Xv, Sv = lanes2d(bR, n, 9), lanes2d(bX, n, 3), lanes2d(bS, n, 6)
     for c in range(9):
-        Rv[0, c] = splat(R[0, c])
+        Rv[0, c] = splat(1.0 if c % 4 == 0 else 0.0)
     for c in range(3):
         Xv[0, c] = splat(0.0)
     k = bodies.shape[0]
