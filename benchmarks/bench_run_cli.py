@@ -92,6 +92,11 @@ import grfguard.cli as cli
 import grfguard.kernels.monitor as km
 import pyarrow.parquet as pq
 from grfguard.io.splice import Splicer
+try:  # as the console script does for `grfguard run` (cli.main)
+    from grfguard._memory import keep_freed_memory
+    keep_freed_memory()
+except ImportError:  # (a tree before it: bench_run_ab.py)
+    pass
 marks = [("imports", time.process_time())]
 spent = {"kernel": 0.0, "parquet": 0.0, "copy": 0.0}
 def timed(fn, key):
@@ -222,6 +227,16 @@ def _reference(prefix: list[str]) -> float:
     return float(res.stdout.strip().splitlines()[-1])
 
 
+def _cpu_name() -> str:
+    """The CPU as LLVM names it (the numba kernels are compiled for it), e.g. znver4."""
+    try:
+        import llvmlite.binding as ll
+
+        return ll.get_host_cpu_name()
+    except Exception:  # pragma: no cover - llvmlite comes with numba
+        return "CPU unknown"
+
+
 def _load() -> str:
     try:
         return f", load average {os.getloadavg()[0]:.1f}"
@@ -274,7 +289,8 @@ def main() -> None:
         SECTION,
         "",
         f"Command: `.venv/bin/python benchmarks/bench_run_cli.py --duration {args.duration:g} "
-        f"--repeat {args.repeat}{' --check' if args.check else ''}` ({platform.machine()}, "
+        f"--repeat {args.repeat}{' --check' if args.check else ''}` ({platform.machine()} "
+        f"{_cpu_name()}, "
         f"{os.cpu_count()} cores, "
         f"{core}Python {platform.python_version()}{load} at the start; "
         f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC). The log: "

@@ -726,6 +726,10 @@ def main() -> None:
     # no command renders with MuJoCo: skip its OpenGL bindings (glfw, about 60 ms of
     # start-up); an explicit MUJOCO_GL is kept
     os.environ.setdefault("MUJOCO_GL", "disable")
+    if sys.argv[1:2] == ["run"]:  # a batch over a whole log: freed memory is reused
+        from grfguard._memory import keep_freed_memory
+
+        keep_freed_memory()
     try:
         if not _run_fast(sys.argv[1:]):
             app()

@@ -287,7 +287,8 @@ PARQUET_READ_COLUMNS = 16
 
 def _read_columns(pf: Any, cols: list[str] | None) -> Any:
     """The columns ``cols`` (None: all) of the Parquet file ``pf`` as one Arrow table,
-    decoded a few columns at a time; unused reader memory goes back to the system."""
+    decoded a few columns at a time; unused reader memory goes back to the system
+    (unless :func:`grfguard._memory.keep_freed_memory` is in effect)."""
     import pyarrow as pa
 
     schema = pf.schema_arrow
@@ -302,7 +303,10 @@ def _read_columns(pf: Any, cols: list[str] | None) -> Any:
                           .columns)
         fields = [schema.field(n) for n in names]
         table = pa.Table.from_arrays(arrays, schema=pa.schema(fields, schema.metadata))
-    pa.default_memory_pool().release_unused()
+    from grfguard._memory import freed_memory_kept
+
+    if not freed_memory_kept():  # (else the memory is reused by the next phase)
+        pa.default_memory_pool().release_unused()
     return table
 
 

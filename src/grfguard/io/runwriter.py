@@ -39,6 +39,11 @@ __all__ = ["write_run", "BLOCK_ROWS"]
 #: Rows per block (and per Parquet row group) of :func:`write_run`: the block's output
 #: buffers (about 30 MB) are reused, so no fresh memory is page-faulted per block.
 BLOCK_ROWS = 1 << 17
+#: Rows per block when the output's row groups are the log file's (the log's columns
+#: copied, :func:`_write_spliced`): the float columns are then copied out of the block
+#: into the group's own buffer, so a small block buffer (10 MB instead of 80) is enough
+#: and less fresh memory is page-faulted ("Memory reuse in grfguard run", BENCHMARKS.md).
+SPLICE_BLOCK_ROWS = 1 << 14
 #: Rows per call of the compiled loop inside a block: its row-major input and output
 #: buffers stay in the cache while they are transposed into the column-major block.
 _CHUNK = 1 << 12
@@ -49,7 +54,9 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
               partial: bool = False) -> int | None:
     """Run ``mon`` (a :class:`~grfguard.pipeline.Monitor`, reset first) over ``log`` and
     write the output to the Parquet file ``path`` (atomically, as
-    :func:`~grfguard.io.logio.write_log`), block by block.
+    :func:`~grfguard.io.logio.write_log`), block by block of ``rows`` rows (one row
+    group each; with ``source``, the file's row groups and blocks of at most
+    :data:`SPLICE_BLOCK_ROWS`).
 
     ``phase("kernel_setup")`` (optional) is called once the compiled loop is loaded (from
     numba's on-disk cache, or compiled), before the first row runs.
@@ -95,6 +102,7 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
     try:
         if src is not None:
             footer, types, columns = src
+            rows = min(rows, SPLICE_BLOCK_ROWS)
             blocks = _Blocks(mon, k, log, max(1, min(rows, n)), raw=set(types),
                              columns=columns)
             try:

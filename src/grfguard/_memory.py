@@ -1,0 +1,68 @@
+"""The memory policy of ``grfguard run``: freed memory is kept and reused, not handed
+back to the system and page-faulted again.
+
+A 10-minute log's run allocates about 700 MB over its life: the decoded input columns,
+the Parquet reader's scratch, the output blocks, the writer's encoding buffers. By
+default two allocators serve it: Arrow's own pool (mimalloc) and the C library's
+``malloc`` (numpy). Both return freed memory to the system soon, so each phase
+page-faults fresh, zeroed memory again; on the 2-core benchmark machine the kernel's
+page zeroing was 0.5-2 s of system time per run (a third of the command). With
+:func:`keep_freed_memory` Arrow allocates through ``malloc`` too, and ``malloc`` keeps
+what is freed (no trimming of its heap, arrays up to 32 MB from the heap), so a phase
+reuses the memory of the one before: BENCHMARKS.md, "Memory reuse in grfguard run".
+
+This is a process-wide setting for a short batch command, applied by the console script
+only (:func:`grfguard.cli.main` for ``grfguard run``); importing grfguard never changes
+the allocator. Where the C library is not glibc nothing is changed.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import sys
+
+__all__ = ["keep_freed_memory"]
+
+#: ``mallopt`` parameters (glibc's malloc.h) and the values set.
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3
+#: Free memory at the top of the heap kept before trimming (1 GiB: none in practice).
+TRIM_THRESHOLD = 1 << 30
+#: Extra memory requested each time the heap grows (fewer, larger ``brk`` calls).
+TOP_PAD = 64 << 20
+#: Allocations up to this size come from the heap (glibc's largest allowed value), not
+#: from their own mapping that ``free`` unmaps: a log's columns are a few MB each.
+MMAP_THRESHOLD = 32 << 20
+
+_kept = False
+
+
+def keep_freed_memory() -> bool:
+    """Make this process keep and reuse freed memory (module docstring); True if set
+    (now or before), False where it cannot be (not glibc; nothing is changed then)."""
+    global _kept
+    if _kept:
+        return True
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None)
+        libc.gnu_get_libc_version  # noqa: B018  (glibc only: musl's mallopt does nothing)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    for param, value in ((_M_MMAP_THRESHOLD, MMAP_THRESHOLD), (_M_TRIM_THRESHOLD,
+                          TRIM_THRESHOLD), (_M_TOP_PAD, TOP_PAD)):
+        if mallopt(param, value) != 1:  # pragma: no cover - glibc accepts all three
+            return False
+    import pyarrow as pa
+
+    pa.set_memory_pool(pa.system_memory_pool())
+    _kept = True
+    return True
+
+
+def freed_memory_kept() -> bool:
+    """Whether :func:`keep_freed_memory` is in effect in this process."""
+    return _kept

@@ -1,0 +1,57 @@
+"""``grfguard run``'s memory policy (grfguard._memory): set by the console script only,
+freed memory kept for reuse, and the output unchanged by it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from grfguard.io.logio import write_log
+
+CHECK = r"""
+import pyarrow as pa
+before = pa.default_memory_pool().backend_name
+import grfguard.cli, grfguard.io.logio  # importing changes nothing
+from grfguard import _memory
+assert pa.default_memory_pool().backend_name == before, "import changed the pool"
+assert not _memory.freed_memory_kept()
+assert _memory.keep_freed_memory() is True
+assert _memory.keep_freed_memory() is True  # (again: nothing more)
+assert _memory.freed_memory_kept()
+assert pa.default_memory_pool().backend_name == "system", pa.default_memory_pool()
+print("ok", before)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_keep_freed_memory_only_when_asked() -> None:
+    res = subprocess.run([sys.executable, "-c", CHECK], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.startswith("ok")
+
+
+def test_console_script_output_equals_in_process_run(tmp_path, clean_walk) -> None:
+    """The console script (memory policy on, smaller spliced blocks) writes the bytes
+    the in-process ``run_log`` (policy off) writes: the same columns, values, footer."""
+    import grfguard.cli as cli
+
+    log = tmp_path / "walk.parquet"
+    write_log(clean_walk.iloc[:20_000], log)
+    inproc = tmp_path / "a.parquet"
+    cli.run_log(log, inproc)
+    exe = Path(sys.executable).parent / "grfguard"
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "grfguard.cli"]
+    script = tmp_path / "b.parquet"
+    res = subprocess.run([*cmd, "run", str(log), "-o", str(script)], capture_output=True,
+                         text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    a, b = pq.read_table(inproc), pq.read_table(script)
+    assert a.schema.equals(b.schema, check_metadata=True)
+    assert a.num_rows == b.num_rows == 20_000
+    assert [c for c in a.column_names if not a[c].equals(b[c])] == []
+    assert inproc.read_bytes() == script.read_bytes()
