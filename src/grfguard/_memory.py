@@ -6,7 +6,7 @@ the Parquet reader's scratch, the output blocks, the writer's encoding buffers. 
 default two allocators serve it: Arrow's own pool (mimalloc) and the C library's
 ``malloc`` (numpy). Both return freed memory to the system soon, so each phase
 page-faults fresh, zeroed memory again; on the 2-core benchmark machine the kernel's
-page zeroing was 0.5-2 s of system time per run (a third of the command). With
+page zeroing was 0.3-2 s of system time per run (a third of the command at worst). With
 :func:`keep_freed_memory` Arrow allocates through ``malloc`` too, and ``malloc`` keeps
 what is freed (no trimming of its heap, arrays up to 32 MB from the heap), so a phase
 reuses the memory of the one before: BENCHMARKS.md, "Memory reuse in grfguard run".
@@ -46,7 +46,7 @@ def keep_freed_memory() -> bool:
         return False
     try:
         libc = ctypes.CDLL(None)
-        libc.gnu_get_libc_version  # noqa: B018  (glibc only: musl's mallopt does nothing)
+        libc.gnu_get_libc_version  # noqa: B018  (glibc only)
         mallopt = libc.mallopt
     except (OSError, AttributeError):
         return False
