@@ -1105,8 +1105,12 @@ def vfs_step_shared(x, y, state, cf, ci, ws, iws, mstate, mws, need):
     for k in range(1, _S_FRONT_END):
         state[k] = mstate[k]
     a, b = _pose_range(mstate, nb, order)
-    for k in range(a, b):
-        state[k] = mstate[k]
+    # copied through views indexed from 0: with ``range(a, b)`` on the arrays themselves
+    # numba's negative-index wraparound made LLVM copy with gathers and scatters (AVX-512
+    # ``vscatterqpd`` is microcoded on AMD Zen 4: 6 % of the SURALP monitor loop there)
+    dst, src = view1d(state, a, b - a), view1d(mstate, a, b - a)
+    for k in range(b - a):
+        dst[k] = src[k]
     for k in range(9):
         raw[k] = mraw[k]
     sh = _shared_slots(mws)
