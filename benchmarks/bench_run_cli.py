@@ -93,8 +93,8 @@ import grfguard.kernels.monitor as km
 import pyarrow.parquet as pq
 from grfguard.io.splice import Splicer
 try:  # as the console script does for `grfguard run` (cli.main)
-    from grfguard._memory import keep_freed_memory
-    keep_freed_memory()
+    from grfguard._memory import batch_process
+    batch_process()
 except ImportError:  # (a tree before it: bench_run_ab.py)
     pass
 marks = [("imports", time.process_time())]

@@ -19,7 +19,10 @@ import grfguard.cli, grfguard.io.logio  # importing changes nothing
 from grfguard import _memory
 assert pa.default_memory_pool().backend_name == before, "import changed the pool"
 assert not _memory.freed_memory_kept()
-assert _memory.keep_freed_memory() is True
+import gc
+assert gc.isenabled()
+_memory.batch_process()
+assert not gc.isenabled()
 assert _memory.keep_freed_memory() is True  # (again: nothing more)
 assert _memory.freed_memory_kept()
 assert pa.default_memory_pool().backend_name == "system", pa.default_memory_pool()
@@ -36,8 +39,9 @@ def test_keep_freed_memory_only_when_asked() -> None:
 
 
 def test_console_script_output_equals_in_process_run(tmp_path, clean_walk) -> None:
-    """The console script (memory policy on, smaller spliced blocks) writes the bytes
-    the in-process ``run_log`` (policy off) writes: the same columns, values, footer."""
+    """The console script (:func:`grfguard._memory.batch_process` on) writes the bytes
+    the in-process ``run_log`` (off) writes: the same columns, values, footer; the log
+    runs as two spliced blocks (``SPLICE_BLOCK_ROWS``) in both."""
     import grfguard.cli as cli
 
     log = tmp_path / "walk.parquet"

@@ -726,15 +726,10 @@ def main() -> None:
     # no command renders with MuJoCo: skip its OpenGL bindings (glfw, about 60 ms of
     # start-up); an explicit MUJOCO_GL is kept
     os.environ.setdefault("MUJOCO_GL", "disable")
-    if sys.argv[1:2] == ["run"]:  # a batch over a whole log: freed memory is reused
-        import gc
+    if sys.argv[1:2] == ["run"]:  # a batch over a whole log
+        from grfguard._memory import batch_process
 
-        from grfguard._memory import keep_freed_memory
-
-        # reference counting frees the run's objects; the cyclic collector would only
-        # walk the imported modules' objects again and again (about 0.1 s on a long log)
-        gc.disable()
-        keep_freed_memory()
+        batch_process()
     try:
         if not _run_fast(sys.argv[1:]):
             app()
