@@ -179,10 +179,12 @@ def system_reset(yp, ys, prm, qstate):
 
 @njit
 def _vfs_reset(state):
-    """``VFSKernel.reset``."""
+    """``VFSKernel.reset`` (nothing for the one-float placeholder of a monitor without a
+    twin sensor: the anchor's slot would lie past its end)."""
     for k in range(state.shape[0]):
         state[k] = 0.0
-    state[_S_ANCHOR] = -1.0
+    if state.shape[0] > _S_ANCHOR:
+        state[_S_ANCHOR] = -1.0
 
 
 # ------------------------------------------------------------------ before the VFS
