@@ -65,7 +65,8 @@ def f():
 def test_real_kernel_dependencies() -> None:
     src = _sources()
     deps = {m: kernel_imports(s.decode(), src) for m, s in src.items()}
-    assert deps["vfs"] >= {"_jit", "fk", "nnls", "vfs_paper"}
+    assert deps["vfs"] >= {"_jit", "fk", "front", "nnls", "vfs_paper"}
+    assert deps["front"] >= {"lanes", "sincos"} and "rne" not in deps["front"]
     assert "nnls" in deps["vfs_paper"]
     assert deps["monitor"] >= {"detect", "standing", "system", "vfs"}
     assert deps["standing"] == {"_jit"} and deps["nnls"] == {"_jit"}
@@ -77,8 +78,12 @@ def test_real_kernel_dependencies() -> None:
     ("standing", {"standing", "system", "monitor", "warmup", "__init__"}),
     ("detect", {"detect", "system", "monitor", "warmup", "__init__"}),
     ("rne", {"rne"}),
-    # the vector lanes: intrinsics only, inlined into the kernels that use them
-    ("lanes", {"lanes", "rne"}),
+    # the vector lanes: intrinsics only, inlined into the kernels that use them (the
+    # inverse dynamics; the virtual sensor's block kinematics, and through them the
+    # monitor)
+    ("lanes", {"lanes", "rne", "front", "vfs", "system", "monitor", "warmup", "__init__"}),
+    ("sincos", {"sincos", "rne", "front", "vfs", "system", "monitor", "warmup", "__init__"}),
+    ("front", {"front", "vfs", "system", "monitor", "warmup", "__init__"}),
     ("_jit", None),  # every module that compiles goes through it
 ])
 def test_a_change_reaches_exactly_its_importers(changed: str, affected: set[str] | None):

@@ -20,8 +20,14 @@ from reference.nnls_split import nnls_prior_qp
 from reference.vfs_stages import PythonVFS
 
 FORCE_COLS = [c for c in VFS_OUTPUT_COLUMNS if c.startswith("vfs_") and c != "vfs_valid"]
-#: Corner forces, totals [N]: the only rounding difference is the QP (nnls vs. ours).
-TOL_N = 1e-9
+#: Corner forces, totals [N]. Rounding differences: the QP (nnls vs. ours) and the
+#: kinematics (the kernel poses the bodies in base axes, eight samples at a time
+#: (grfguard.kernels.front), the reference in MuJoCo's order: positions within about
+#: 1e-15 m, which the rates' second differences multiply by 1 / dt^2 = 1e6). Measured
+#: up to 3e-9 N over this module's walks and settings.
+TOL_N = 1e-8
+#: ZMP [m]: the same rates (measured up to 7e-13 m, 2e-10 m without the gyro).
+TOL_ZMP = 1e-9
 
 
 @pytest.fixture(scope="module")
@@ -41,8 +47,10 @@ def _assert_same(ref: pd.DataFrame, out: pd.DataFrame, tol_n: float = TOL_N) -> 
             tol = tol_n
         elif c.startswith("vfs_cop"):
             tol = 1e-9  # [m]
+        elif c.startswith("zmp_"):
+            tol = TOL_ZMP
         else:
-            tol = 1e-12  # CoM, ZMP [m], contact and valid flags
+            tol = 1e-12  # CoM [m] (measured 8e-15), contact and valid flags
         err = float(np.abs(a[ok] - b[ok]).max()) if ok.any() else 0.0
         assert err <= tol, f"{c}: {err:.3e} > {tol:.0e}"
 

@@ -134,6 +134,24 @@ def lanes2d(typingctx, buf, n, m):
     return ret(buf, types.intp, types.intp), codegen
 
 
+@intrinsic
+def lanes_start(typingctx, buf):
+    """Index of the entry of ``buf`` where :func:`lanes2d`'s array starts (0 .. LANES - 1):
+    lane ``j`` of that array's vector ``(r, c)`` (``m`` columns) is the float
+    ``buf[lanes_start(buf) + (r * m + c) * LANES + j]``."""
+    if not _is_f64_buffer(buf):
+        return None
+
+    def codegen(context, builder, sig, args):
+        src = make_array(sig.args[0])(context, builder, args[0])
+        i64 = ir.IntType(64)
+        addr = builder.ptrtoint(src.data, i64)
+        pad = builder.and_(builder.sub(ir.Constant(i64, 0), addr), ir.Constant(i64, LANES * 8 - 1))
+        return builder.lshr(pad, ir.Constant(i64, 3))
+
+    return types.intp(buf), codegen
+
+
 def _binop(name: str):
     """The intrinsic of LLVM's ``name`` (``fadd``, ...) on two operands, floats splat."""
 
@@ -184,4 +202,5 @@ def _ov_neg(a):
         return lambda a: _neg(a)
 
 
-__all__ = ["LANES", "vec", "VecType", "lanes_size", "splat", "lane", "vload", "lanes2d"]
+__all__ = ["LANES", "vec", "VecType", "lanes_size", "splat", "lane", "vload", "lanes2d",
+           "lanes_start"]

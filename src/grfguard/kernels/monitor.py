@@ -68,6 +68,8 @@ from grfguard.kernels.detect import (
     reset_state,
     time_guard_step,
 )
+from grfguard.kernels.front import IW_SLOT
+from grfguard.kernels.lanes import LANES
 from grfguard.kernels.standing import N_SD, standing_params, standing_reset, standing_step
 from grfguard.kernels.system import (
     N_SYSS,
@@ -81,12 +83,15 @@ from grfguard.kernels.system import (
 )
 from grfguard.kernels.system import OUT_COLUMNS as SYS_COLUMNS
 from grfguard.kernels.vfs import (
+    _P_FRONT_CF,
     _S_HN,
     _S_PREVF,
     _S_PREVL_OK,
     IN_COLUMNS,
     OUT_COLUMNS,
     VFSKernel,
+    front_fill,
+    front_qblk,
     twin_shareable,
     vfs_step,
 )
@@ -108,7 +113,8 @@ _NV = len(OUT_COLUMNS)
 _O_TOT = OUT_COLUMNS.index("vfs_total_r")
 _O_CEST = OUT_COLUMNS.index("contact_est_r")
 _O_VALID = OUT_COLUMNS.index("vfs_valid")
-_I_REF_VFS = 9 + IN_COLUMNS.index("contact_ref_r")
+_I_VFS = 9  # the virtual sensor's input row: xc[_I_VFS : _I_VFS + 24]
+_I_REF_VFS = _I_VFS + IN_COLUMNS.index("contact_ref_r")
 # scratch (ws) layout of monitor_step: detector scratch 0..71, then own slots
 _W_V, _W_TOT, _W_CEST, _W_CREF, _W_REC, _W_ETA, _W_FLAG, _W_KIND = (
     72, 80, 82, 84, 86, 94, 102, 110)
@@ -562,10 +568,17 @@ def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk):
     direct = ycs == 1  # rows contiguous: written in place
     nbk = max(1, n) if direct else yblk.shape[0]
     by_col = ycs > yrs
+    front = mp[_M_MODE] == 1.0 and cf[_P_FRONT_CF] != 0.0
     for k0 in range(0, n, nbk):
         r = min(nbk, n - k0)
         for kk in range(r):
             k = k0 + kk
+            if front:  # the virtual sensor's poses, LANES rows at a time
+                j = k % LANES
+                if j == 0:
+                    _front_rows_flat(Xf, xo + k * xrs, xrs, xcs, min(LANES, n - k), cf, ci,
+                                     vws)
+                viws[IW_SLOT] = j
             b = xo + k * xrs
             for j in range(n_in):
                 xrow[j] = Xf[b + j * xcs]
@@ -588,6 +601,20 @@ def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk):
                 b = yo + (k0 + kk) * yrs
                 for j in range(m):
                     Yf[b + j * ycs] = yblk[kk, j]
+    if front:
+        viws[IW_SLOT] = -1
+
+
+@njit_nort(inline="always")
+def _front_rows_flat(Xf, b, xrs, xcs, nt, cf, ci, vws):
+    """The virtual sensor's block (:func:`grfguard.kernels.vfs.front_fill`) from ``nt``
+    rows of the flat input starting at ``Xf[b]`` (its joint angles: the VFS input's first
+    12 columns, at column :data:`_I_VFS` of the monitor's row)."""
+    qblk = front_qblk(vws, ci)
+    for j in range(nt):
+        for c in range(12):
+            qblk[j, c] = Xf[b + j * xrs + (_I_VFS + c) * xcs]
+    front_fill(cf, ci, vws, nt)
 
 
 def _flat(A: np.ndarray) -> tuple[np.ndarray, int, int] | None:

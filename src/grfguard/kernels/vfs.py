@@ -1,7 +1,9 @@
 """The virtual force sensor as one compiled step over plain arrays.
 
 :func:`vfs_step` processes one sample: attitude filter, forward kinematics of the MuJoCo
-tree (:mod:`grfguard.kernels.fk`), leg odometry, finite-difference rates with the
+tree (:mod:`grfguard.kernels.fk`; for a tree of hinges and the default sites, the poses
+in base axes eight samples at a time, :mod:`grfguard.kernels.front`, rotated by the
+attitude per sample), leg odometry, finite-difference rates with the
 angular momentum, the Butterworth low-passes (direct form II transposed, as
 ``scipy.signal.lfilter``), Newton-Euler ZMP, kinematic corner contact, the
 sole-compliance prior and the corner QP (:mod:`grfguard.kernels.nnls`), the per-foot
@@ -54,6 +56,14 @@ from grfguard.kernels.fk import (
     fk_sites,
     subtree_com_of,
 )
+from grfguard.kernels.front import (
+    IW_SLOT,
+    front_block,
+    front_constants,
+    front_pose,
+    front_ws_size,
+)
+from grfguard.kernels.lanes import LANES
 from grfguard.kernels.nnls import prior_qp_warm
 from grfguard.kernels.vfs_paper import (  # the non-default settings' stages
     N_XSTATE,
@@ -103,7 +113,9 @@ _P_USE_ACC, _P_ACC_VERT, _P_USE_L, _P_KIN, _P_HAS_GYRO, _P_HAS_REF = 7, 8, 9, 10
 _P_BODY_MASS_SUM, _P_QIT = 13, 14  # q_IT: 14..17
 _P_ANCHOR_HOLD = 40  # VFSConfig.anchor_hold (after the vfs_paper block)
 _P_TWIST = 41  # VFSConfig.contact_twist
-N_PRM = 42  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
+# offsets of the block kinematics' constants in cf / ci (grfguard.kernels.front; 0: off)
+_P_FRONT_CF, _P_FRONT_CI = 42, 43
+N_PRM = 44  # 18..39: the non-default settings (grfguard.kernels.vfs_paper)
 # int parameters (iprm)
 _IP_TRUNK, _IP_ROOT, _IP_JOINTS = 0, 1, 2
 _IP_IMU = _IP_JOINTS + _NJ
@@ -222,9 +234,14 @@ def _step(x, y, state, cf, ci, ws, iws):
      v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
      tail) = _scratch_views(ws, nq, nb)
     aw, ax, ay, az = _attitude_filter(x, state, prm)
-    p_AC0, p_AC1, p_AC2 = _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay,
-                                      az, qpos, xpos, xquat, xmat, xipos, ximat, stc, msub,
-                                      sxp, sxm, qin, pk, tail, view1d(iws, 32, 11))
+    if prm[_P_FRONT_CF] != 0.0:  # the poses from the block (grfguard.kernels.front)
+        p_AC0, p_AC1, p_AC2 = _kinematics_front(x, prm, iprm, tree, cf, ci, ws, iws,
+                                                corner_radius, aw, ax, ay, az, xipos, ximat,
+                                                stc, msub, sxp, pk)
+    else:
+        p_AC0, p_AC1, p_AC2 = _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax,
+                                          ay, az, qpos, xpos, xquat, xmat, xipos, ximat, stc,
+                                          msub, sxp, sxm, qin, pk, tail, view1d(iws, 32, 11))
     st0, st1 = _stance(x, prm, pk)
     xo = _S_FIXED + 15 * order + 12 * (nb - 1)  # state of the vfs_paper stages
     if prm[P_KANC] > 0.0:  # vfs_paper: anchor attitude (rotates the frames)
@@ -415,7 +432,7 @@ def _scratch_views(ws, nq, nb):
     o += 8
     return (qpos, xpos, xquat, xmat, xipos, ximat, stc, msub, sxp, sxm, qin, raw, main, v3a,
             v3b, v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs,
-            qp_dots, view1d(ws, o, ws.shape[0] - N_SHARED - o))
+            qp_dots, view1d(ws, o, ws.shape[0] - N_SHARED - front_ws_size(nb) - o))
 
 
 @njit_nort(inline="always")
@@ -459,14 +476,7 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
      body_iquat, body_mass, jnt_type, jnt_qposadr, jnt_axis, jnt_pos, qpos0, body_order,
      body_kind) = tree
     site_body, site_sameframe, site_pos, site_quat = sites
-    qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
-    tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
-    nt = math.sqrt(tw * tw + tx * tx + ty * ty + tz * tz)
-    if nt < 1e-15:
-        tw, tx, ty, tz = 1.0, 0.0, 0.0, 0.0
-    elif abs(nt - 1.0) > 1e-15:
-        inv = 1.0 / nt
-        tw, tx, ty, tz = tw * inv, tx * inv, ty * inv, tz * inv
+    tw, tx, ty, tz = _trunk_quat(prm, aw, ax, ay, az)
     for k in range(qpos0.shape[0]):
         qin[k] = qpos0[k]
     r = iprm[_IP_ROOT]
@@ -498,6 +508,40 @@ def _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax, ay, az, qpos, 
         pk[k, 1] = sxp[1 + k, 1]
         pk[k, 2] = sxp[1 + k, 2] - corner_radius[k]
     return subtree_com_of(iprm[_IP_TRUNK], body_parent, body_mass, xipos, stc, msub)
+
+
+@njit_nort(inline="always")
+def _trunk_quat(prm, aw, ax, ay, az):
+    """The trunk's attitude: the IMU's ``a`` times ``q_IT``, normalised (mju_normalize4)."""
+    qi0, qi1, qi2, qi3 = prm[_P_QIT], prm[_P_QIT + 1], prm[_P_QIT + 2], prm[_P_QIT + 3]
+    tw, tx, ty, tz = _qmul(aw, ax, ay, az, qi0, qi1, qi2, qi3)
+    nt = math.sqrt(tw * tw + tx * tx + ty * ty + tz * tz)
+    if nt < 1e-15:
+        tw, tx, ty, tz = 1.0, 0.0, 0.0, 0.0
+    elif abs(nt - 1.0) > 1e-15:
+        inv = 1.0 / nt
+        tw, tx, ty, tz = tw * inv, tx * inv, ty * inv, tz * inv
+    return tw, tx, ty, tz
+
+
+@njit_nort(inline="always")
+def _kinematics_front(x, prm, iprm, tree, cf, ci, ws, iws, corner_radius, aw, ax, ay, az,
+                      xipos, ximat, stc, msub, sxp, pk):
+    """:func:`_kinematics` from the block of :mod:`grfguard.kernels.front` (the default
+    settings: body CoMs and inertial axes, site positions; not the bodies' origins and
+    axes, not the sites' axes)."""
+    tw, tx, ty, tz = _trunk_quat(prm, aw, ax, ay, az)
+    for k in range(3):
+        xipos[0, k] = 0.0
+    for k in range(9):
+        ximat[0, k] = 1.0 if (k == 0 or k == 4 or k == 8) else 0.0
+    front_pose(x, cf, ci, int(prm[_P_FRONT_CF]), int(prm[_P_FRONT_CI]), ci[0], ws, iws,
+               N_SHARED, tw, tx, ty, tz, xipos, ximat, sxp)
+    for k in range(8):
+        pk[k, 0] = sxp[1 + k, 0]
+        pk[k, 1] = sxp[1 + k, 1]
+        pk[k, 2] = sxp[1 + k, 2] - corner_radius[k]
+    return subtree_com_of(iprm[_IP_TRUNK], tree[0], tree[8], xipos, stc, msub)
 
 
 @njit_nort(inline="always")
@@ -1038,10 +1082,42 @@ def vfs_run(X, Y, state, cf, ci, ws, iws):
     loop (the batch path: the same step as streaming); returns the number of valid
     samples. Arguments after ``X, Y`` as in :func:`vfs_step`."""
     n = 0
-    for t in range(X.shape[0]):
-        if _step(X[t], Y[t], state, cf, ci, ws, iws):
-            n += 1
+    T = X.shape[0]
+    front = cf[_P_FRONT_CF] != 0.0
+    for t0 in range(0, T, LANES):
+        nt = min(LANES, T - t0)
+        if front:
+            front_rows(X, t0, nt, 0, cf, ci, ws, iws)
+        for j in range(nt):
+            iws[IW_SLOT] = j
+            if _step(X[t0 + j], Y[t0 + j], state, cf, ci, ws, iws):
+                n += 1
+    iws[IW_SLOT] = -1
     return n
+
+
+@njit_nort(inline="always")
+def front_rows(X, t0, nt, c0, cf, ci, ws, iws):
+    """Fill the block of :mod:`grfguard.kernels.front` from rows ``t0 .. t0 + nt - 1`` of
+    ``X`` (joint angles in columns ``c0 .. c0 + 11``)."""
+    qblk = front_qblk(ws, ci)
+    for j in range(nt):
+        for k in range(_NJ):
+            qblk[j, k] = X[t0 + j, c0 + k]
+    front_fill(cf, ci, ws, nt)
+
+
+@njit_nort(inline="always")
+def front_qblk(ws, ci):
+    """The block's joint angles (``LANES`` x 12): rows to fill before :func:`front_fill`."""
+    return view2d(ws, ws.shape[0] - N_SHARED - front_ws_size(ci[0]), LANES, _NJ)
+
+
+@njit_nort(inline="always")
+def front_fill(cf, ci, ws, nt):
+    """The block's poses of its first ``nt`` rows (:func:`grfguard.kernels.front.front_block`);
+    a sample ``j`` of them is then stepped with ``iws[IW_SLOT] = j``."""
+    front_block(cf, ci, int(cf[_P_FRONT_CF]), int(cf[_P_FRONT_CI]), ci[0], ws, N_SHARED, nt)
 
 
 # ------------------------------------------------------------------ twin sensor
@@ -1287,21 +1363,33 @@ class VFSKernel:
         self.state = np.zeros(_state_size(nb - 1, self.order) + N_XSTATE + N_PEND)
         header = np.array([nb, tm.jnt_type.shape[0], tm.nq,
                            tm.site_body.shape[0], self.order], np.int64)
-        self.cf = np.ascontiguousarray(np.concatenate([
-            prm, self.body_inertia.ravel(), self.corner_radius, self.filt_b.ravel(),
-            self.filt_a.ravel(), self.filt_zi.ravel(), tm.body_pos.ravel(),
-            tm.body_quat.ravel(), tm.body_ipos.ravel(), tm.body_iquat.ravel(), tm.body_mass,
-            tm.jnt_axis.ravel(), tm.jnt_pos.ravel(), tm.qpos0, tm.site_pos.ravel(),
-            tm.site_quat.ravel(),
-        ]), dtype=float)
-        self.ci = np.ascontiguousarray(np.concatenate([
-            header, ip, tm.body_parent, tm.body_jntadr, tm.body_jntnum, tm.body_sameframe,
-            tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe, tm.body_order,
-            tm.body_kinds(),
-        ]), dtype=np.int64)
+        cf = [prm, self.body_inertia.ravel(), self.corner_radius, self.filt_b.ravel(),
+              self.filt_a.ravel(), self.filt_zi.ravel(), tm.body_pos.ravel(),
+              tm.body_quat.ravel(), tm.body_ipos.ravel(), tm.body_iquat.ravel(), tm.body_mass,
+              tm.jnt_axis.ravel(), tm.jnt_pos.ravel(), tm.qpos0, tm.site_pos.ravel(),
+              tm.site_quat.ravel()]
+        ci = [header, ip, tm.body_parent, tm.body_jntadr, tm.body_jntnum, tm.body_sameframe,
+              tm.jnt_type, tm.jnt_qposadr, tm.site_body, tm.site_sameframe, tm.body_order,
+              tm.body_kinds()]
+        # the poses eight samples at a time (grfguard.kernels.front): the default sites
+        # (the paper's anchor attitude and split read the sites' axes: MuJoCo's order)
+        front = None if (prm[P_KANC] > 0.0 or prm[P_SPLIT_PAPER] != 0.0) else front_constants(
+            tm, ip[_IP_JOINTS:_IP_JOINTS + _NJ], int(ip[_IP_TRUNK]),
+            ip[_IP_IMU:_IP_SOLES + 2])
+        if front is not None:
+            prm[_P_FRONT_CF] = sum(a.size for a in cf)
+            prm[_P_FRONT_CI] = sum(a.size for a in ci)
+            cf.append(front[0])
+            ci.append(front[1])
+        self.cf = np.ascontiguousarray(np.concatenate(cf), dtype=float)
+        self.ci = np.ascontiguousarray(np.concatenate(ci), dtype=np.int64)
         self._entry = None
-        self.ws = np.zeros(2 * tm.nq + 32 * nb + 500)
+        nf = front_ws_size(nb)
+        self.ws = np.zeros(2 * tm.nq + 32 * nb + 500 + nf)
+        # the block's joint angles: none yet (NaN matches no row)
+        self.ws[self.ws.size - N_SHARED - nf:][:LANES * _NJ] = np.nan
         self.iws = np.zeros(64, np.int64)
+        self.iws[IW_SLOT] = -1
         self.reset()
 
     def reset(self) -> None:
