@@ -15,9 +15,11 @@ from the row alone. So the poses are split:
 * **per sample** (:func:`front_pose`): those rotated by the trunk's attitude.
 
 A sample's poses are taken from the block only when its joint angles are the block's,
-bit for bit (else they are computed for it alone, the same arithmetic in lane 0), so a
-streamed sample, a batch sample and a sample whose row was changed after the block was
-filled get the same bits: streaming and batch stay identical by construction.
+bit for bit; else they are computed for it alone, in floats, by the same functions
+(each lane's operations are the IEEE operations of the float code, with no fused
+multiply-add, so the bits are a lane's). A streamed sample, a batch sample and a sample
+whose row was changed after the block was filled get the same bits: streaming and batch
+stay identical by construction.
 
 Used for trees of one free joint (the trunk, body 1) and one hinge per other body, and
 the default settings' sites (positions only: the paper's anchor attitude and split, which
@@ -40,7 +42,7 @@ from numba.extending import register_jitable
 from grfguard.kernels._jit import njit_nort, view1d, view2d
 from grfguard.kernels.fk import FREE, HINGE, _mv, _q2m
 from grfguard.kernels.lanes import LANES, lanes2d, lanes_size, lanes_start, splat, vload
-from grfguard.kernels.sincos import sincos_flat
+from grfguard.kernels.sincos import SINCOS_MAX, _sincos_one, sincos_flat
 
 __all__ = ["front_constants", "front_ws_size", "front_block", "front_pose", "N_FRONT_SITES",
            "FB_COLS", "IW_SLOT"]
@@ -130,9 +132,18 @@ def front_constants(tm, joint_qadr: np.ndarray, trunk: int, sites: np.ndarray
 def front_ws_size(nb):
     """Floats of the block at the end of the sensor's scratch: the joint angles
     (``LANES`` x 12), angles, sines and cosines (3 x ``nb LANES``), the bodies' frames
-    and the block's poses (vector arrays)."""
+    and the block's poses (vector arrays), then one sample's frames and poses (floats:
+    a sample computed alone)."""
     return (LANES * N_FRONT_Q + 3 * nb * LANES + lanes_size(nb, 12)
-            + lanes_size(nb + N_FRONT_SITES, _OUT_COLS))
+            + lanes_size(nb + N_FRONT_SITES, _OUT_COLS) + 12 * nb
+            + _OUT_COLS * (nb + N_FRONT_SITES))
+
+
+@njit_nort(inline="always")
+def _obuf_offset(ws, nb, shared):
+    """Offset in ``ws`` of the buffer of the block's poses (:func:`_views`' ``obuf``)."""
+    return (ws.shape[0] - shared - front_ws_size(nb) + LANES * N_FRONT_Q + 3 * nb * LANES
+            + lanes_size(nb, 12))
 
 
 @njit_nort(inline="always")
@@ -146,9 +157,17 @@ def _views(ws, nb, shared):
     CS = view1d(ws, o + 2 * nb * LANES, nb * LANES)
     o += 3 * nb * LANES
     rbuf = view1d(ws, o, lanes_size(nb, 12))
-    o += lanes_size(nb, 12)
-    obuf = view1d(ws, o, lanes_size(nb + N_FRONT_SITES, _OUT_COLS))
+    obuf = view1d(ws, _obuf_offset(ws, nb, shared), lanes_size(nb + N_FRONT_SITES, _OUT_COLS))
     return qblk, TH, SN, CS, rbuf, obuf
+
+
+@njit_nort(inline="always")
+def _single_views(ws, nb, shared):
+    """One sample's frames ``(nb, 12)`` and poses ``(nb + N_FRONT_SITES, 12)`` (floats,
+    the last part of the block) and the offset of the poses in ``ws``."""
+    o = ws.shape[0] - shared - 12 * nb - _OUT_COLS * (nb + N_FRONT_SITES)
+    po = o + 12 * nb
+    return view2d(ws, o, nb, 12), view2d(ws, po, nb + N_FRONT_SITES, _OUT_COLS), po
 
 
 @njit_nort(inline="always")
@@ -267,6 +286,15 @@ def front_block(cf, ci, fo, io, nb, ws, shared, nt):
             _pose_unit(i, par[i], kind[i], c, s, FB, RX)
         else:
             _pose_body(i, par[i], c, s, FB, RX)
+    _outputs(nb, FB, FS, same, sb, RX, OUT)
+    rbuf[0] = rbuf[0]  # (the vector views borrow the buffers)
+    obuf[0] = obuf[0]
+
+
+@njit_nort(inline="always")
+def _outputs(nb, FB, FS, same, sb, RX, OUT):
+    """Every body's CoM and inertial axes (:func:`_body_out`), then the sites'
+    positions, from the frames ``RX`` into ``OUT`` (vectors or floats alike)."""
     for i in range(1, nb):
         _body_out(i, same[i] != 0, FB, RX, OUT)
     for s in range(N_FRONT_SITES):
@@ -276,8 +304,28 @@ def front_block(cf, ci, fo, io, nb, ws, shared, nt):
         OUT[nb + s, 0] = RX[b, 9] + p0
         OUT[nb + s, 1] = RX[b, 10] + p1
         OUT[nb + s, 2] = RX[b, 11] + p2
-    rbuf[0] = rbuf[0]  # (the vector views borrow the buffers)
-    obuf[0] = obuf[0]
+
+
+@njit_nort(inline="always")
+def _single(x, cf, ci, fo, io, nb, ws, shared):
+    """:func:`front_block` for the row ``x`` alone in floats (each operation the one of a
+    lane: the same bits); returns the offset of its poses in ``ws``."""
+    FB, FS, Q0, par, qcol, sb, kind, same = _consts(cf, ci, fo, io, nb)
+    RX, OUT, po = _single_views(ws, nb, shared)
+    for k in range(12):
+        RX[1, k] = 1.0 if (k == 0 or k == 4 or k == 8) else 0.0
+    for i in range(2, nb):
+        c = qcol[i]
+        th = x[c] - Q0[i] if c >= 0 else 0.0
+        s, co = _sincos_one(th)
+        if abs(th) > SINCOS_MAX:
+            s, co = math.sin(th), math.cos(th)
+        if kind[i] >= 0:
+            _pose_unit(i, par[i], kind[i], co, s, FB, RX)
+        else:
+            _pose_body(i, par[i], co, s, FB, RX)
+    _outputs(nb, FB, FS, same, sb, RX, OUT)
+    return po
 
 
 @njit_nort(inline="always")
@@ -296,28 +344,26 @@ def front_pose(x, cf, ci, fo, io, nb, ws, iws, shared, tw, tx, ty, tz, xipos, xi
     """The row ``x``'s body CoMs ``xipos``, inertial axes ``ximat`` (rows 1..) and sites
     ``sxp`` with the trunk at the origin and its attitude the unit quaternion ``t``: from
     the block's lane of the row (``iws[IW_SLOT]``) when its joint angles are the lane's,
-    else computed for the row alone (into lane 0)."""
+    else computed for the row alone (:func:`_single`, the same bits)."""
     qblk, TH, SN, CS, rbuf, obuf = _views(ws, nb, shared)
     j = iws[IW_SLOT]
-    if not (j >= 0 and _same_angles(x, qblk, j)):
-        for k in range(N_FRONT_Q):
-            qblk[0, k] = x[k]
-        front_block(cf, ci, fo, io, nb, ws, shared, 1)
-        j = 0
+    if j >= 0 and _same_angles(x, qblk, j):  # pose (r, c) at ws[st + (12 r + c) step]
+        st, step = _obuf_offset(ws, nb, shared) + lanes_start(obuf) + j, LANES
+    else:
+        st, step = _single(x, cf, ci, fo, io, nb, ws, shared), 1
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = _q2m(tw, tx, ty, tz)
-    st = lanes_start(obuf) + j
     for i in range(1, nb):
-        b = st + i * _OUT_COLS * LANES
-        v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, obuf[b], obuf[b + LANES],
-                         obuf[b + 2 * LANES])
+        b = st + i * _OUT_COLS * step
+        v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, ws[b], ws[b + step],
+                         ws[b + 2 * step])
         xipos[i, 0], xipos[i, 1], xipos[i, 2] = v0, v1, v2
         for c in range(3):
-            m = b + (3 + c) * LANES
-            v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, obuf[m], obuf[m + 3 * LANES],
-                             obuf[m + 6 * LANES])
+            m = b + (3 + c) * step
+            v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, ws[m], ws[m + 3 * step],
+                             ws[m + 6 * step])
             ximat[i, c], ximat[i, 3 + c], ximat[i, 6 + c] = v0, v1, v2
     for s in range(N_FRONT_SITES):
-        b = st + (nb + s) * _OUT_COLS * LANES
-        v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, obuf[b], obuf[b + LANES],
-                         obuf[b + 2 * LANES])
+        b = st + (nb + s) * _OUT_COLS * step
+        v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, ws[b], ws[b + step],
+                         ws[b + 2 * step])
         sxp[s, 0], sxp[s, 1], sxp[s, 2] = v0, v1, v2
