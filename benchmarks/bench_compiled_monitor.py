@@ -125,10 +125,11 @@ def main() -> None:
         ref_log = log if label.startswith("VFS columns") else log.iloc[:10_000]
         rsps, _ = _batch(ref, ref_log)
         batch.append(f"| {label} | {sps:,.0f} ({cpu:.1f}) | {rsps:,.0f} | {sps / rsps:.0f}x |")
-    from bench_batch_stages import _reference_us, suralp_stages, talos_stages
+    from _common import reference_us
+    from bench_batch_stages import suralp_stages, talos_stages
     from bench_batch_stages import table as stage_table
 
-    ref_us = _reference_us()
+    ref_us = reference_us()
     stages = stage_table(suralp_stages(raw), talos_stages(), ref_us)
     load1 = os.getloadavg()[0]
     body = "\n".join([
