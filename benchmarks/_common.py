@@ -112,3 +112,14 @@ def renamed_copy(src: Path, name: str, work: Path) -> None:
         for p, r in pat:
             text = p.sub(r, text)
         f.write_text(text)
+
+
+def cpu_name() -> str:
+    """The CPU as LLVM names it (the numba kernels are compiled for it), e.g. znver4: the
+    figures of different hosts are not comparable, even as ratios to the reference."""
+    try:
+        import llvmlite.binding as ll
+
+        return ll.get_host_cpu_name()
+    except Exception:  # pragma: no cover - llvmlite comes with numba
+        return "CPU unknown"

@@ -125,7 +125,7 @@ def main() -> None:
         ref_log = log if label.startswith("VFS columns") else log.iloc[:10_000]
         rsps, _ = _batch(ref, ref_log)
         batch.append(f"| {label} | {sps:,.0f} ({cpu:.1f}) | {rsps:,.0f} | {sps / rsps:.0f}x |")
-    from _common import reference_us
+    from _common import cpu_name, reference_us
     from bench_batch_stages import suralp_stages, talos_stages
     from bench_batch_stages import table as stage_table
 
@@ -134,9 +134,10 @@ def main() -> None:
     load1 = os.getloadavg()[0]
     body = "\n".join([
         f"Command: `taskset -c 1 .venv/bin/python benchmarks/bench_compiled_monitor.py "
-        f"--n {a.n}` ({platform.processor() or platform.machine()}, {os.cpu_count()} cores "
+        f"--n {a.n}` ({platform.machine()} {cpu_name()}, {os.cpu_count()} cores "
         f"shared with other jobs; load average {load0:.1f} at the start, {load1:.1f} at the "
-        f"end). Paper scenario on a {a.duration:.0f} s SURALP walk (seed 0), default "
+        f"end; {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC). Paper scenario on a "
+        f"{a.duration:.0f} s SURALP walk (seed 0), default "
         "settings (standing layer on). Kernels warmed up first "
         f"(`warm_up()`: {t_warm:.1f} s in this process).",
         "",

@@ -53,7 +53,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import BENCHMARKS_MD, update_section
+from _common import BENCHMARKS_MD, cpu_name, update_section
 
 SECTION = "## grfguard run end to end (issue 11)"
 #: The runs' environment: Python may write the bytecode of grfguard's own modules (as a
@@ -227,16 +227,6 @@ def _reference(prefix: list[str]) -> float:
     return float(res.stdout.strip().splitlines()[-1])
 
 
-def _cpu_name() -> str:
-    """The CPU as LLVM names it (the numba kernels are compiled for it), e.g. znver4."""
-    try:
-        import llvmlite.binding as ll
-
-        return ll.get_host_cpu_name()
-    except Exception:  # pragma: no cover - llvmlite comes with numba
-        return "CPU unknown"
-
-
 def _load() -> str:
     try:
         return f", load average {os.getloadavg()[0]:.1f}"
@@ -290,7 +280,7 @@ def main() -> None:
         "",
         f"Command: `.venv/bin/python benchmarks/bench_run_cli.py --duration {args.duration:g} "
         f"--repeat {args.repeat}{' --check' if args.check else ''}` ({platform.machine()} "
-        f"{_cpu_name()}, "
+        f"{cpu_name()}, "
         f"{os.cpu_count()} cores, "
         f"{core}Python {platform.python_version()}{load} at the start; "
         f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC). The log: "
