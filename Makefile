@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test install lint bench bench-all clean
+.PHONY: demo test install lint bench bench-all boundscheck clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ bench: $(STAMP)
 
 bench-all: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
+
+# every kernel compiled again with numba's bounds checks and run through its array-size
+# paths (about four minutes of CPU; not part of `make test`)
+boundscheck: $(STAMP)
+	$(BIN)/python benchmarks/check_bounds.py
 
 clean:
 	rm -rf $(VENV) out
