@@ -43,7 +43,7 @@ bench-all: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
 
 # every kernel compiled again with numba's bounds checks and run through its array-size
-# paths (about four minutes of CPU; not part of `make test`)
+# paths (about five minutes of CPU; not part of `make test`)
 boundscheck: $(STAMP)
 	$(BIN)/python benchmarks/check_bounds.py
 

@@ -7,11 +7,11 @@ drives them through the paths whose arrays differ in size: the warm-up; the SURA
 monitor in batch and streaming (array and dict calls) with the virtual sensor inside,
 with its columns precomputed (no sensor: one-float placeholders) and without the
 common-mode layer (no twin sensor); the virtual sensor alone (batch, steps); the paper
-method; Talos's described monitor when ``example-robot-data`` is installed. An index
+method; Talos's described monitor (its inverse dynamics in vector lanes). An index
 out of bounds raises ``IndexError`` (the run fails and names the call). Two such writes
 were found this way on 2026-11-27 (BENCHMARKS.md, "SURALP virtual sensor: kinematics
 eight samples at a time"). Not part of ``make test``: compiling everything again takes
-about four minutes of CPU.
+about five minutes of CPU.
 
 Usage: ``make boundscheck`` (or ``.venv/bin/python benchmarks/check_bounds.py``, which
 sets the environment and runs itself in a child process).
@@ -75,11 +75,6 @@ def _run() -> None:
     from grfguard.detect.config import MonitorConfig
 
     step("paper method", lambda: Monitor.for_log(log, MonitorConfig(method="paper")).run(log))
-    try:
-        import example_robot_data  # noqa: F401
-    except ImportError:
-        print("  Talos: skipped (example-robot-data not installed)")
-        return
     from grfguard.estimate.described import run_described
     from grfguard.model.description import load_description
     from grfguard.model.loader import load_model
@@ -90,7 +85,7 @@ def _run() -> None:
         w = simulate_robot(r, scaled_gait(r, duration=2.0), NoiseConfig(), seed=1)
         run_described(w, robot=r)
 
-    step("Talos described monitor", talos)
+    step("Talos described monitor (inverse dynamics in vector lanes)", talos)
 
 
 def main() -> None:
