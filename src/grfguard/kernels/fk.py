@@ -240,6 +240,16 @@ def _mv(m0, m1, m2, m3, m4, m5, m6, m7, m8, v0, v1, v2):
             m6 * v0 + m7 * v1 + m8 * v2)
 
 
+@njit_nort(inline="always")
+def _mm(a0, a1, a2, a3, a4, a5, a6, a7, a8, b0, b1, b2, b3, b4, b5, b6, b7, b8):
+    """3x3 product of row-major entries."""
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7,
+            a0 * b2 + a1 * b5 + a2 * b8, a3 * b0 + a4 * b3 + a5 * b6,
+            a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7,
+            a6 * b2 + a7 * b5 + a8 * b8)
+
+
 # mj_local2Global (sameframe: 0 none, 1 body, 2 inertia, 3 body rotation, 4 inertia
 # rotation) is written out in _inertial_frames and fk_sites: a call per body with a
 # dozen array arguments costs more than the arithmetic.

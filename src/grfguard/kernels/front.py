@@ -43,7 +43,7 @@ import numpy as np
 from numba.extending import register_jitable
 
 from grfguard.kernels._jit import njit_nort, view1d, view2d
-from grfguard.kernels.fk import FREE, HINGE, _mv, _q2m
+from grfguard.kernels.fk import FREE, HINGE, _mm, _mv, _q2m
 from grfguard.kernels.lanes import LANES, lanes2d, lanes_size, lanes_start, splat, vload
 from grfguard.kernels.sincos import SINCOS_MAX, _sincos_one, sincos_flat
 
@@ -143,15 +143,9 @@ def front_ws_size(nb):
 
 
 @njit_nort(inline="always")
-def _obuf_offset(ws, nb, shared):
-    """Offset in ``ws`` of the buffer of the block's poses (:func:`_views`' ``obuf``)."""
-    return (ws.shape[0] - shared - front_ws_size(nb) + LANES * N_FRONT_Q + 3 * nb * LANES
-            + lanes_size(nb, 12))
-
-
-@njit_nort(inline="always")
 def _views(ws, nb, shared):
-    """The block's views into ``ws`` (it ends ``shared`` floats before the end)."""
+    """The block's views into ``ws`` (it ends ``shared`` floats before the end) and the
+    offset of ``obuf`` in ``ws``."""
     o = ws.shape[0] - shared - front_ws_size(nb)
     qblk = view2d(ws, o, LANES, N_FRONT_Q)
     o += LANES * N_FRONT_Q
@@ -160,8 +154,9 @@ def _views(ws, nb, shared):
     CS = view1d(ws, o + 2 * nb * LANES, nb * LANES)
     o += 3 * nb * LANES
     rbuf = view1d(ws, o, lanes_size(nb, 12))
-    obuf = view1d(ws, _obuf_offset(ws, nb, shared), lanes_size(nb + N_FRONT_SITES, _OUT_COLS))
-    return qblk, TH, SN, CS, rbuf, obuf
+    o += lanes_size(nb, 12)
+    obuf = view1d(ws, o, lanes_size(nb + N_FRONT_SITES, _OUT_COLS))
+    return qblk, TH, SN, CS, rbuf, obuf, o
 
 
 @njit_nort(inline="always")
@@ -188,22 +183,6 @@ def _consts(cf, ci, fo, io, nb):
 
 
 @njit_nort(inline="always")
-def _mm3(r, i, p, L):
-    """``r[i] = r[p] @ L`` (row-major 3x3 of vectors; ``L`` a 9-tuple)."""
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = (r[p, 0], r[p, 1], r[p, 2], r[p, 3], r[p, 4],
-                                          r[p, 5], r[p, 6], r[p, 7], r[p, 8])
-    r[i, 0] = a0 * L[0] + a1 * L[3] + a2 * L[6]
-    r[i, 1] = a0 * L[1] + a1 * L[4] + a2 * L[7]
-    r[i, 2] = a0 * L[2] + a1 * L[5] + a2 * L[8]
-    r[i, 3] = a3 * L[0] + a4 * L[3] + a5 * L[6]
-    r[i, 4] = a3 * L[1] + a4 * L[4] + a5 * L[7]
-    r[i, 5] = a3 * L[2] + a4 * L[5] + a5 * L[8]
-    r[i, 6] = a6 * L[0] + a7 * L[3] + a8 * L[6]
-    r[i, 7] = a6 * L[1] + a7 * L[4] + a8 * L[7]
-    r[i, 8] = a6 * L[2] + a7 * L[5] + a8 * L[8]
-
-
-@njit_nort(inline="always")
 def _pose_body(i, p, c, s, FB, RX):
     """Body ``i``'s rotation ``RX[i, 0:9]`` and origin ``RX[i, 9:12]`` from its parent
     ``p``'s and its hinge's ``cos``, ``sin`` (vectors), in base axes."""
@@ -220,7 +199,10 @@ def _pose_body(i, p, c, s, FB, RX):
     RX[i, 9] = RX[p, 9] + d0
     RX[i, 10] = RX[p, 10] + d1
     RX[i, 11] = RX[p, 11] + d2
-    _mm3(RX, i, p, L)
+    (RX[i, 0], RX[i, 1], RX[i, 2], RX[i, 3], RX[i, 4], RX[i, 5], RX[i, 6], RX[i, 7],
+     RX[i, 8]) = _mm(RX[p, 0], RX[p, 1], RX[p, 2], RX[p, 3], RX[p, 4], RX[p, 5], RX[p, 6],
+                     RX[p, 7], RX[p, 8], L[0], L[1], L[2], L[3], L[4], L[5], L[6], L[7],
+                     L[8])
 
 
 @njit_nort(inline="always")
@@ -270,7 +252,7 @@ def front_block(cf, ci, fo, io, nb, ws, shared, nt):
     in the block's rows ``qblk[0:nt]`` (rows ``nt..`` are set to the last one's, whose
     lanes they repeat): per body its CoM and inertial axes, per site its position."""
     FB, FS, Q0, par, qcol, sb, kind, same = _consts(cf, ci, fo, io, nb)
-    qblk, TH, SN, CS, rbuf, obuf = _views(ws, nb, shared)
+    qblk, TH, SN, CS, rbuf, obuf, oo = _views(ws, nb, shared)
     for j in range(nt, LANES):
         for k in range(N_FRONT_Q):
             qblk[j, k] = qblk[nt - 1, k]
@@ -348,10 +330,10 @@ def front_pose(x, cf, ci, fo, io, nb, ws, iws, shared, tw, tx, ty, tz, xipos, xi
     ``sxp`` with the trunk at the origin and its attitude the unit quaternion ``t``: from
     the block's lane of the row (``iws[IW_SLOT]``) when its joint angles are the lane's,
     else computed for the row alone (:func:`_single`, the same bits)."""
-    qblk, TH, SN, CS, rbuf, obuf = _views(ws, nb, shared)
+    qblk, TH, SN, CS, rbuf, obuf, oo = _views(ws, nb, shared)
     j = iws[IW_SLOT]
     if j >= 0 and _same_angles(x, qblk, j):  # pose (r, c) at ws[st + (12 r + c) step]
-        st, step = _obuf_offset(ws, nb, shared) + lanes_start(obuf) + j, LANES
+        st, step = oo + lanes_start(obuf) + j, LANES
     else:
         st, step = _single(x, cf, ci, fo, io, nb, ws, shared), 1
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = _q2m(tw, tx, ty, tz)

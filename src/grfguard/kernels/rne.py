@@ -42,6 +42,7 @@ from grfguard.kernels.fk import (
     HINGE,
     SLIDE,
     TreeModel,
+    _mm,
     _mv,
     fk_bodies,
     fk_sites,
@@ -563,16 +564,6 @@ def _block_sincos(t0, nt, q, qcol, q0, bodies, TH, SN, CS):
                 t = t0 + min(g * LANES + j, nt - 1)
                 TH[(g * k + b) * LANES + j] = q[t, max(c, 0)] - q0[i] if c >= 0 else 0.0
     sincos_flat(TH, ng * k * LANES, SN, CS)
-
-
-@njit_nort(inline="always")
-def _mm(a0, a1, a2, a3, a4, a5, a6, a7, a8, b0, b1, b2, b3, b4, b5, b6, b7, b8):
-    """3x3 product of row-major entries."""
-    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7,
-            a0 * b2 + a1 * b5 + a2 * b8, a3 * b0 + a4 * b3 + a5 * b6,
-            a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
-            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7,
-            a6 * b2 + a7 * b5 + a8 * b8)
 
 
 @njit_nort(inline="always")
