@@ -82,6 +82,24 @@ def test_one_code_columns_equal_python_strings(code) -> None:
         codes_to_arrow(np.full(4, len(names)), names)
 
 
+def test_take_and_gather_build_the_same_text() -> None:
+    """Arrow's ``take`` (a column of several codes, ``pyarrow.compute`` loaded) and the
+    byte gather used without it give the same array."""
+    import pyarrow.compute  # noqa: F401  (the take path needs it loaded)
+
+    from grfguard.io import codes
+
+    names = (*KIND_NAMES, "", "drölf")
+    rng = np.random.default_rng(3)
+    idx = rng.integers(0, len(names), 20_000).astype(np.int64)
+    taken = codes._take(idx, names)
+    gathered = codes._gather(idx, names)
+    taken.validate(full=True)
+    assert taken.type == gathered.type == pa.large_string()
+    assert taken.equals(gathered)
+    assert taken.to_pylist()[:50] == [names[i] for i in idx[:50]]
+
+
 def test_zero_copy_read_equals_the_copying_read(bad_walk) -> None:
     path, _ = bad_walk
     ref = read_log(path)

@@ -17,6 +17,7 @@ This is the one place where codes become names: the monitor's batch output
 from __future__ import annotations
 
 import functools
+import sys
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -27,6 +28,10 @@ if TYPE_CHECKING:
 
 __all__ = ["codes_to_str", "codes_to_categorical", "strings_to_str", "codes_to_arrow",
            "codes_to_dictionary"]
+
+
+#: Rows from which :func:`_take` imports ``pyarrow.compute`` for a column of several codes.
+_PC_IMPORT_ROWS = 1 << 18
 
 
 def _index(codes: Any, n_names: int) -> np.ndarray:
@@ -85,13 +90,31 @@ def codes_to_dictionary(codes: Any, names: tuple[str, ...]) -> Any:
 def _names_array(names: tuple[str, ...]) -> Any:
     """``names`` as one Arrow ``large_string`` array, shared by every column and block
     built from them (one dictionary for a whole Parquet column chunk)."""
-    return _take(np.arange(len(names), dtype=np.int64), names)
+    return _gather(np.arange(len(names), dtype=np.int64), names)
 
 
 def _take(idx: np.ndarray, names: Sequence[str]) -> Any:
-    """``names[idx]`` (valid int64 codes) as an Arrow ``large_string`` array, built from
-    its buffers (no ``pa.array``: pyarrow would import pandas for it). A column of one
-    code (a fault kind that stays ``none``) repeats its text directly."""
+    """``names[idx]`` (valid int64 codes) as an Arrow ``large_string`` array. A column of
+    several codes is Arrow's ``take`` on the names (about ten times faster than
+    :func:`_gather`'s byte gather) once ``pyarrow.compute`` is loaded (pandas loads it) or
+    the column is long enough to pay for its import (about 40 ms)."""
+    n = idx.size
+    if n and idx[0] == idx.min() == idx.max():
+        return _gather(idx, names)
+    if "pyarrow.compute" not in sys.modules and n < _PC_IMPORT_ROWS:
+        return _gather(idx, names)
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    ind = np.ascontiguousarray(idx, dtype=np.int64)
+    return pc.take(_names_array(tuple(names)),
+                   pa.Array.from_buffers(pa.int64(), n, [None, pa.py_buffer(ind)]))
+
+
+def _gather(idx: np.ndarray, names: Sequence[str]) -> Any:
+    """:func:`_take` built from its buffers (no ``pa.array``: pyarrow would import pandas
+    for it). A column of one code (a fault kind that stays ``none``) repeats its text
+    directly."""
     import pyarrow as pa
 
     n = idx.size
