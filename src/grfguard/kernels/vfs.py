@@ -261,8 +261,8 @@ def _step(x, y, state, cf, ci, ws, iws):
             x, state, xo, prm, pk, pwt0, pwt1, pwt2, com0, com1, com2, ground, aw, ax, ay, az)
     else:
         _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt)
-        _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, cc, nb, order,
-                       dt)
+        _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
+                       order, dt)
         _keep_shared(ws, pwt0, pwt1, pwt2, ground, com0, com1, com2, st0, st1, aw, ax, ay, az)
         F0, F1, F2, zmp0, zmp1 = _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw,
                                                main, v3a, v3b, v3c, v3d, aw, ax, ay, az,
@@ -416,7 +416,7 @@ def _scratch_views(ws, nq, nb):
     o += 16
     forces = view1d(ws, o, 8)
     o += 8
-    lin = view1d(ws, o, 3)  # (unused since the angular momentum sums in registers)
+    lin = view1d(ws, o, 3)
     o += 3
     cc = view1d(ws, o, 3)
     o += 3
@@ -647,8 +647,8 @@ def _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt):
 
 
 @njit_nort(inline="always")
-def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, cc, nb, order,
-                   dt):
+def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
+                   order, dt):
     """Rate of the angular momentum about the CoM (``raw[3:6]``) [N m] from this and the
     previous body poses (kept in ``state``)."""
     nbr = nb - 1
@@ -661,7 +661,7 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, cc, n
             for i in range(2, nb):
                 s += xipos[i, k] * body_mass[i]
             cc[k] = s / msum
-        L0, L1, L2 = _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, cc,
+        L0, L1, L2 = _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc,
                                        nbr, dt)
         if state[_S_PREVL_OK] != 0.0:
             raw[3] = (L0 - state[_S_PREVL]) / dt
@@ -680,7 +680,7 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, cc, n
 
 
 @njit_nort(inline="always")
-def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, cc, nbr, dt):
+def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nbr, dt):
     """Angular momentum about the CoM ``cc`` (3 floats) [N m s]: the bodies' linear
     momenta (finite differences of their CoMs ``pb`` -> ``xipos``) plus their spin
     (finite differences of their orientations ``pr`` -> ``ximat``).
