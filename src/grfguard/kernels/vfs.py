@@ -683,14 +683,9 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
 def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nbr, dt):
     """Angular momentum about the CoM ``cc`` (3 floats) [N m s]: the bodies' linear
     momenta (finite differences of their CoMs ``pb`` -> ``xipos``) plus their spin
-    (finite differences of their orientations ``pr`` -> ``ximat``).
-
-    Both sums are linear in the differences, so they are summed undivided and divided
-    by ``dt`` (``2 dt`` for the spin) once at the end: 6 divisions per sample instead
-    of 6 per body."""
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
+    (finite differences of their orientations ``pr`` -> ``ximat``)."""
+    for k in range(3):
+        lin[k] = 0.0
     L0 = 0.0
     L1 = 0.0
     L2 = 0.0
@@ -700,12 +695,18 @@ def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nb
         r0 = xipos[bi, 0] - cc[0]
         r1 = xipos[bi, 1] - cc[1]
         r2 = xipos[bi, 2] - cc[2]
-        w0 = xipos[bi, 0] - pb[i, 0]
-        w1 = xipos[bi, 1] - pb[i, 1]
-        w2 = xipos[bi, 2] - pb[i, 2]
-        s0 += (r1 * w2 - r2 * w1) * m_i
-        s1 += (r2 * w0 - r0 * w2) * m_i
-        s2 += (r0 * w1 - r1 * w0) * m_i
+        w0 = (xipos[bi, 0] - pb[i, 0]) / dt
+        w1 = (xipos[bi, 1] - pb[i, 1]) / dt
+        w2 = (xipos[bi, 2] - pb[i, 2]) / dt
+        c0 = (r1 * w2 - r2 * w1) * m_i
+        c1 = (r2 * w0 - r0 * w2) * m_i
+        c2 = (r0 * w1 - r1 * w0) * m_i
+        if i == 0:
+            lin[0], lin[1], lin[2] = c0, c1, c2
+        else:
+            lin[0] += c0
+            lin[1] += c1
+            lin[2] += c2
         R = ximat[bi]
         P = pr[i]
         # dR = R P^T as numpy's stacked matmul computes it (fused multiply-adds)
@@ -715,18 +716,24 @@ def _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc, nb
         d12 = fma(R[5], P[8], fma(R[4], P[7], R[3] * P[6]))
         d20 = fma(R[8], P[2], fma(R[7], P[1], R[6] * P[0]))
         d21 = fma(R[8], P[5], fma(R[7], P[4], R[6] * P[3]))
-        om0 = d21 - d12
-        om1 = d02 - d20
-        om2 = d10 - d01
+        om0 = (d21 - d12) / (2.0 * dt)
+        om1 = (d02 - d20) / (2.0 * dt)
+        om2 = (d10 - d01) / (2.0 * dt)
         # w_B = R^T w, scaled by the inertia, rotated back
         wb0 = (R[0] * om0 + R[3] * om1 + R[6] * om2) * body_inertia[i, 0]
         wb1 = (R[1] * om0 + R[4] * om1 + R[7] * om2) * body_inertia[i, 1]
         wb2 = (R[2] * om0 + R[5] * om1 + R[8] * om2) * body_inertia[i, 2]
-        L0 += (R[0] * wb0 + R[2] * wb2) + R[1] * wb1
-        L1 += (R[3] * wb0 + R[5] * wb2) + R[4] * wb1
-        L2 += (R[6] * wb0 + R[8] * wb2) + R[7] * wb1
-    h = 2.0 * dt
-    return s0 / dt + L0 / h, s1 / dt + L1 / h, s2 / dt + L2 / h
+        # (einsum's summation order: first + last, then the middle term)
+        t0 = (R[0] * wb0 + R[2] * wb2) + R[1] * wb1
+        t1 = (R[3] * wb0 + R[5] * wb2) + R[4] * wb1
+        t2 = (R[6] * wb0 + R[8] * wb2) + R[7] * wb1
+        if i == 0:
+            L0, L1, L2 = t0, t1, t2
+        else:
+            L0 += t0
+            L1 += t1
+            L2 += t2
+    return lin[0] + L0, lin[1] + L1, lin[2] + L2
 
 
 @njit_nort(inline="always")
