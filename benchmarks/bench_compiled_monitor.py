@@ -125,11 +125,12 @@ def main() -> None:
         ref_log = log if label.startswith("VFS columns") else log.iloc[:10_000]
         rsps, _ = _batch(ref, ref_log)
         batch.append(f"| {label} | {sps:,.0f} ({cpu:.1f}) | {rsps:,.0f} | {sps / rsps:.0f}x |")
-    from _common import cpu_name, reference_us
+    from _common import cpu_name, fresh_touch_ms, reference_us
     from bench_batch_stages import suralp_stages, talos_stages
     from bench_batch_stages import table as stage_table
 
     ref_us = reference_us()
+    touch = fresh_touch_ms(48)  # (the child inherits this process's core)
     stages = stage_table(suralp_stages(raw), talos_stages(), ref_us)
     load1 = os.getloadavg()[0]
     body = "\n".join([
@@ -139,7 +140,11 @@ def main() -> None:
         f"end; {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC). Paper scenario on a "
         f"{a.duration:.0f} s SURALP walk (seed 0), default "
         "settings (standing layer on). Kernels warmed up first "
-        f"(`warm_up()`: {t_warm:.1f} s in this process).",
+        f"(`warm_up()`: {t_warm:.1f} s in this process). The first touch of 48 MB of "
+        f"fresh memory in a fresh process took {touch:.0f} ms in this run "
+        "(`_common.fresh_touch_ms`; `Monitor.run` writes its 77 output columns, 37 MB per "
+        "minute of log, into fresh memory: on a virtual machine its figure moves with "
+        "this one, the compiled loop's does not).",
         "",
         "Streaming, one sample per call (wall clock per call):",
         "",
