@@ -93,7 +93,7 @@ def test_take_and_gather_build_the_same_text() -> None:
     rng = np.random.default_rng(3)
     idx = rng.integers(0, len(names), 20_000).astype(np.int64)
     taken = codes._take(idx, names)
-    gathered = codes._gather(idx, names)
+    gathered = codes._gather(idx, names, False)
     taken.validate(full=True)
     assert taken.type == gathered.type == pa.large_string()
     assert taken.equals(gathered)

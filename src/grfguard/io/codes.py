@@ -90,7 +90,7 @@ def codes_to_dictionary(codes: Any, names: tuple[str, ...]) -> Any:
 def _names_array(names: tuple[str, ...]) -> Any:
     """``names`` as one Arrow ``large_string`` array, shared by every column and block
     built from them (one dictionary for a whole Parquet column chunk)."""
-    return _gather(np.arange(len(names), dtype=np.int64), names)
+    return _gather(np.arange(len(names), dtype=np.int64), names, len(names) == 1)
 
 
 def _take(idx: np.ndarray, names: Sequence[str]) -> Any:
@@ -99,10 +99,9 @@ def _take(idx: np.ndarray, names: Sequence[str]) -> Any:
     :func:`_gather`'s byte gather) once ``pyarrow.compute`` is loaded (pandas loads it) or
     the column is long enough to pay for its import (about 40 ms)."""
     n = idx.size
-    if n and idx[0] == idx.min() == idx.max():
-        return _gather(idx, names)
-    if "pyarrow.compute" not in sys.modules and n < _PC_IMPORT_ROWS:
-        return _gather(idx, names)
+    one = bool(n) and idx[0] == idx.min() == idx.max()
+    if one or ("pyarrow.compute" not in sys.modules and n < _PC_IMPORT_ROWS):
+        return _gather(idx, names, one)
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -111,16 +110,16 @@ def _take(idx: np.ndarray, names: Sequence[str]) -> Any:
                    pa.Array.from_buffers(pa.int64(), n, [None, pa.py_buffer(ind)]))
 
 
-def _gather(idx: np.ndarray, names: Sequence[str]) -> Any:
+def _gather(idx: np.ndarray, names: Sequence[str], one: bool) -> Any:
     """:func:`_take` built from its buffers (no ``pa.array``: pyarrow would import pandas
-    for it). A column of one code (a fault kind that stays ``none``) repeats its text
-    directly."""
+    for it). A column of one code (``one``: a fault kind that stays ``none``) repeats its
+    text directly."""
     import pyarrow as pa
 
     n = idx.size
     enc = [str(s).encode("utf-8") for s in names]
     lens = np.array([len(e) for e in enc], dtype=np.int64)
-    if n and idx[0] == idx.min() == idx.max():
+    if one:
         offsets = np.arange(n + 1, dtype=np.int64) * lens[idx[0]]
         data = enc[int(idx[0])] * n
     else:

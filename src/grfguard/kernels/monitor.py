@@ -778,8 +778,8 @@ def chunk_buffers(k: MonitorKernel, rows: int) -> tuple[np.ndarray, np.ndarray, 
 
     The input chunk's rows are padded to an odd number of cache lines: the compiled loop
     reads one value of every column per sample, and with a power-of-two row length
-    (4096 floats: 32 kB apart) all of them would fall in the same L1 cache set (about
-    3 % of the SURALP loop)."""
+    (4096 floats: 32 kB apart) all of them would fall in the same L1 cache set (3-4 %
+    of the SURALP loop, ``benchmarks/bench_run_layouts.py``)."""
     lines = -(-max(rows, 1) // 8)
     lines += 1 - lines % 2
     XT = np.empty((len(k.in_cols), 8 * lines))[:, :rows]
