@@ -37,20 +37,26 @@ def reference_us(repeat: int = 5) -> float:
     return best * 1e6
 
 
-_TOUCH_CODE = ("import sys, time; import numpy as np; n = int(sys.argv[1]) * 131072; "
-               "t = time.perf_counter(); a = np.empty(n); a.fill(0.0); "
-               "print((time.perf_counter() - t) * 1e3)")
+def fresh_float(code: str, *args: str, prefix: list[str] | None = None) -> float:
+    """Run ``code`` (Python printing a number last) with ``args`` in a fresh interpreter
+    under ``prefix`` (e.g. ``taskset -c 1``) and return that number; ``_common`` is
+    importable there."""
+    res = subprocess.run([*(prefix or []), sys.executable, "-c",
+                          "import sys; sys.path.insert(0, sys.argv[1]); " + code,
+                          str(Path(__file__).parent), *args],
+                         capture_output=True, text=True, check=True)
+    return float(res.stdout.strip().splitlines()[-1])
 
 
 def fresh_touch_ms(mb: int = 48, prefix: list[str] | None = None) -> float:
     """Time to allocate and first touch ``mb`` MB in a fresh process (``np.empty`` and
-    ``fill``) [ms], run under ``prefix`` (e.g. ``taskset -c 1``). On a virtual machine
-    the first touch of memory moves with the host (8 ms and 231 ms for 48 MB minutes
-    apart on the session-30 host), and ``Monitor.run`` / ``grfguard run`` write their
-    outputs into fresh memory: a figure of theirs holds only next to this one."""
-    res = subprocess.run([*(prefix or []), sys.executable, "-c", _TOUCH_CODE, str(mb)],
-                         capture_output=True, text=True, check=True)
-    return float(res.stdout.strip().splitlines()[-1])
+    ``fill``) [ms], run under ``prefix``. On a virtual machine the first touch of memory
+    moves with the host (8 ms and 231 ms for 48 MB minutes apart on the session-30 host),
+    and ``Monitor.run`` / ``grfguard run`` write their outputs into fresh memory: a
+    figure of theirs holds only next to this one."""
+    return fresh_float("import time; import numpy as np; n = int(sys.argv[2]) * 131072; "
+                       "t = time.perf_counter(); a = np.empty(n); a.fill(0.0); "
+                       "print((time.perf_counter() - t) * 1e3)", str(mb), prefix=prefix)
 
 
 def alarm_episodes(out) -> int:

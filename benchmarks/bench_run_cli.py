@@ -53,7 +53,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import BENCHMARKS_MD, cpu_name, fresh_touch_ms, update_section
+from _common import BENCHMARKS_MD, cpu_name, fresh_float, fresh_touch_ms, update_section
 
 SECTION = "## grfguard run end to end (issue 11)"
 #: The runs' environment: Python may write the bytecode of grfguard's own modules (as a
@@ -220,11 +220,8 @@ def _budget(n: int, ph: dict[str, float]) -> str:
 
 def _reference(prefix: list[str]) -> float:
     """:func:`_common.reference_us` in a fresh process on the command's core [µs]."""
-    code = ("import sys; sys.path.insert(0, sys.argv[1]); from _common import reference_us;"
-            " print(reference_us())")
-    res = subprocess.run([*prefix, sys.executable, "-c", code, str(Path(__file__).parent)],
-                         capture_output=True, text=True, check=True)
-    return float(res.stdout.strip().splitlines()[-1])
+    return fresh_float("from _common import reference_us; print(reference_us())",
+                       prefix=prefix)
 
 
 def _load() -> str:

@@ -14,9 +14,8 @@ printed too):
   (4,096 floats: every column's value of a sample 32 kB from the next, one L1 set), into a
   column-major output (``Monitor.run``'s) or a row-major one;
 * ``Monitor.run`` whole;
-* the output frame's parts: the input columns taken from the log, their copy into the
-  chunks, the text columns (``kind_<s>``, ``system_state``: :func:`grfguard.io.codes.
-  codes_to_str`) and the rest of the conversions.
+* two parts of the output frame: the input columns taken from the log and the text
+  columns (``kind_<s>``, ``system_state``: :func:`grfguard.io.codes.codes_to_str`).
 
 Pin it to one core; nothing is written to BENCHMARKS.md::
 
@@ -54,7 +53,7 @@ def _variants(mon: Monitor, log) -> dict:
     k = mon._batch_kernel(log)
     shallow = log.copy(deep=False)
     shallow.attrs = {}  # as run_frame: column access would deep-copy the metadata
-    src = [(km._column(log, c) if c in log.columns else None) for c in k.in_cols]
+    src = [(km._column(shallow, c) if c in shallow.columns else None) for c in k.in_cols]
     X = np.ascontiguousarray(np.column_stack(
         [s if s is not None else np.full(n, math.nan) for s in src]))
     m = len(k.out_cols)

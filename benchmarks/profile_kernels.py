@@ -159,7 +159,7 @@ def _report(work: Path, data: Path, window: int, top: int, lines: bool = False) 
 def _report_lines(work: Path, per_ip: collections.Counter, names: dict, total: int,
                   top: int) -> None:
     """Samples by source line (innermost inlined location, ``addr2line -i``) and by the
-    kernel function that line belongs to (objects compiled with ``NUMBA_DEBUGINFO=1``)."""
+    Python function holding that line (objects compiled with ``NUMBA_DEBUGINFO=1``)."""
     per_line: collections.Counter = collections.Counter()
     per_func: collections.Counter = collections.Counter()
     by_obj: dict = collections.defaultdict(list)
@@ -242,8 +242,8 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=15)
     ap.add_argument("--work", type=Path, default=Path("/tmp/grfguard-profile"))
     ap.add_argument("--lines", action="store_true",
-                    help="compile with NUMBA_DEBUGINFO=1 (own cache under --work) and "
-                    "report samples by source line and kernel function")
+                    help="compile with NUMBA_DEBUGINFO=1 (own cache beside --work) and "
+                    "report samples by Python function and source line")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
