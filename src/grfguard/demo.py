@@ -69,11 +69,11 @@ def run_demo(
     console.print("[bold]4/5[/] writing figures and metrics")
     atomic_write_text(out_dir / "metrics.json", json.dumps(to_jsonable(results), indent=2))
     atomic_write_text(out_dir / "metrics.md", _metrics_markdown(results))
-    n_png = _write_figures(runs, results, out_dir)
+    pngs = _write_figures(runs, results, out_dir)
     console.print("[bold]5/5[/] writing the HTML report")
     report = _write_reports(runs, results, out_dir)
     _print_table(results, out)
-    console.print(f"{n_png} figures in {escape(str(out_dir / 'figures'))}")
+    console.print("figures: " + ", ".join(f"{n} in {escape(str(d))}" for d, n in pngs.items()))
     out.print(f"report: {escape(str(report.resolve()))}")
     return results
 
@@ -114,18 +114,23 @@ def _sensor_metrics(results: dict[str, Any], method: str) -> Any:
     return results[method].get("detection", {}).get("sensors")
 
 
-def _write_figures(runs: dict[str, Any], results: dict[str, Any], out_dir: Path) -> int:
-    """PNG figures of the default run (whole walk and 3-9 s) and of the paper's run."""
+def _write_figures(runs: dict[str, Any], results: dict[str, Any],
+                   out_dir: Path) -> dict[Path, int]:
+    """PNG figures of the default run (whole walk and 3-9 s) and of the paper's run;
+    returns the number written per folder."""
     from grfguard.report.figures import write_png_figures
 
     metrics = _sensor_metrics(results, "default")
-    pngs = write_png_figures(runs["default"], out_dir / "figures", metrics=metrics)
+    dirs = {name: out_dir / name for name in ("figures", "figures_zoom", "figures_paper")}
+    counts = {dirs["figures"]: len(write_png_figures(runs["default"], dirs["figures"],
+                                                     metrics=metrics))}
     # The same figures over six seconds around the onset, where single steps are visible.
-    pngs += write_png_figures(runs["default"], out_dir / "figures_zoom", metrics=metrics,
-                              t_range=(3.0, 9.0), per_sensor=False)
-    pngs += write_png_figures(runs["paper"], out_dir / "figures_paper",
-                              metrics=_sensor_metrics(results, "paper"))
-    return len(pngs)
+    counts[dirs["figures_zoom"]] = len(write_png_figures(
+        runs["default"], dirs["figures_zoom"], metrics=metrics, t_range=(3.0, 9.0),
+        per_sensor=False))
+    counts[dirs["figures_paper"]] = len(write_png_figures(
+        runs["paper"], dirs["figures_paper"], metrics=_sensor_metrics(results, "paper")))
+    return counts
 
 
 def _write_reports(runs: dict[str, Any], results: dict[str, Any], out_dir: Path) -> Path:
