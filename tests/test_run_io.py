@@ -100,6 +100,35 @@ def test_take_and_gather_build_the_same_text() -> None:
     assert taken.to_pylist()[:50] == [names[i] for i in idx[:50]]
 
 
+_PC_BRANCH = """
+import sys
+import numpy as np
+from grfguard.io import codes
+assert "pyarrow.compute" not in sys.modules and "pandas" not in sys.modules
+names = ("none", "frozen", "drift")
+small = np.arange(1000, dtype=np.int64) % 3
+a = codes._take(small, names)
+assert "pyarrow.compute" not in sys.modules, "a short column imported pyarrow.compute"
+big = np.arange(codes._PC_IMPORT_ROWS, dtype=np.int64) % 3
+b = codes._take(big, names)
+assert "pyarrow.compute" in sys.modules, "a long column did not take the Arrow path"
+assert a.to_pylist() == [names[i] for i in small]
+assert b.slice(0, 1000).equals(a) and len(b) == len(big)
+assert "pandas" not in sys.modules
+"""
+
+
+def test_take_without_pandas_imports_compute_only_for_long_columns() -> None:
+    """Without pandas (``grfguard run``), a short column of several codes stays on the byte
+    gather (no ``pyarrow.compute`` import); one of 2^18 rows or more loads it and takes."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-c", _PC_BRANCH], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+
+
 def test_zero_copy_read_equals_the_copying_read(bad_walk) -> None:
     path, _ = bad_walk
     ref = read_log(path)
