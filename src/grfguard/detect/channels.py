@@ -263,23 +263,6 @@ _MAX_EXCURSION = 200_000
 _OUT_NAMES = ("flag", "kind", "fault_est", "recovered", "onset_est")
 
 
-def _kinds(codes: np.ndarray, names: tuple[str, ...]) -> Any:
-    """The kind column of ``codes`` (indices into ``names``) in the dtype pandas gives a
-    column of those strings (its Arrow string dtype: built from the codes by Arrow, not
-    string by string from Python objects)."""
-    obj = np.array(names, dtype=object)
-    dtype = pd.Series(obj).dtype
-    if getattr(dtype, "storage", None) == "pyarrow":
-        import pyarrow as pa
-
-        arr = pa.DictionaryArray.from_arrays(pa.array(codes),
-                                             pa.array(list(names), pa.large_string()))
-        out = pd.array(arr.dictionary_decode(), dtype=dtype)
-        if out.dtype == dtype:
-            return out
-    return obj[codes]
-
-
 class ChannelMonitor:
     """Per-channel detection, kind, recovery and flag clearing (module docstring), batch
     (:meth:`run`) or one sample at a time (:meth:`update`). Both run the same compiled
@@ -350,6 +333,7 @@ class ChannelMonitor:
             LogFormatError: No F/T channel with its virtual channel, no contact column,
                 or a channel without a calibrated scale.
         """
+        from grfguard.io.codes import codes_to_str
         from grfguard.io.logio import without_attrs
         from grfguard.kernels.channels import KIND_NAMES, channels_run
 
@@ -371,21 +355,23 @@ class ChannelMonitor:
         V = np.ascontiguousarray(log[[f"vfs_{c[3:]}" for c in chans]].to_numpy(float)
                                  ).reshape(n, m)
         ks = self._k = self._kernel_state(chans, min(n, _MAX_EXCURSION + 1))
-        outs = (np.empty((n, m), bool), np.empty((n, m), np.int8), np.empty((n, m)),
-                np.empty((n, m)), np.empty((n, m)))  # every element written
+        # every element written; column-major: each output column contiguous, taken by
+        # the frame without a copy
+        outs = tuple(np.empty((m, n), dt).T for dt in (bool, np.int8, float, float, float))
         channels_run(t, np.ascontiguousarray(cr), np.ascontiguousarray(cl), X, V, ks["side"],
                      ks["sigma"], ks["prm"], ks["fst"], ks["ist"], ks["exc"], ks["gate"],
                      *outs)
         if n:
             self._t_prev = float(t[-1])
-        cols = {f"{name}_{c}": (_kinds(a[:, j], KIND_NAMES) if name == "kind" else a[:, j])
+        cols = {f"{name}_{c}": (codes_to_str(a[:, j], KIND_NAMES) if name == "kind"
+                                else a[:, j])
                 for j, c in enumerate(chans) for name, a in zip(_OUT_NAMES, outs, strict=True)}
         if any(k in log.columns for k in cols):
             out = log.copy()
             for k, a in cols.items():
                 out[k] = a
         else:
-            out = pd.concat([log, pd.DataFrame(cols, index=log.index)], axis=1)
+            out = pd.concat([log, pd.DataFrame(cols, index=log.index, copy=False)], axis=1)
         out.attrs = {**attrs, "channel_monitor": {"h": self.config.h,
                                                       "kappa": self.config.kappa,
                                                       "source": self.config.source}}

@@ -302,8 +302,9 @@ def warm() -> None:
     outs = (np.zeros((2, 1), np.bool_), np.zeros((2, 1), np.int8), np.zeros((2, 1)),
             np.zeros((2, 1)), np.zeros((2, 1)))
     prm = np.ones(N_PRM)
+    # ChannelMonitor.run writes column-major outputs (2 x 2: not C-contiguous as well)
     channels_run(t, c, c, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm, fst, ist, exc,
-                 gate, *outs)
+                 gate, *(np.zeros((2, 2), a.dtype).T for a in outs))
     channels_sample(0, 0.0, True, False, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm,
                     fst, ist, exc, gate, *outs)
     gate_run(gate, t, c, c, 0.1, np.zeros(2, np.bool_))
