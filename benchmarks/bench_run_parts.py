@@ -4,9 +4,10 @@ SURALP, the paper scenario on the 60 s walk (seed 0), default monitor (common-mo
 on, VFS inside). Each round runs ``Monitor.run`` once and then a copy of
 ``kernels.monitor.run_frame`` with a timer between its parts (the kernel set-up, the
 input columns, the buffers, the compiled loop into its reused output block, the blocks
-split into the returned columns, the text columns, the frame assembly, ``attrs``), so both see the same load; prints the minimum and median of each
-part in µs/sample of process CPU time (the loop and the split of its blocks into the
-columns summed over the blocks). Pin it to one core::
+split into the returned columns, the text columns, the frame assembly, ``attrs``), so
+both see the same load; prints the minimum and median of each part in µs/sample of
+process CPU time (the loop and the split of its blocks into the columns summed over the
+blocks). Pin it to one core::
 
     taskset -c 0 .venv/bin/python benchmarks/bench_run_parts.py --rounds 9
 """

@@ -794,9 +794,7 @@ class _FrameColumns:
 
     def take(self, Y: np.ndarray, a: int, b: int) -> None:
         """Rows ``a:b`` from the loop's block ``Y`` (rows x outputs)."""
-        self.F[:, a:b] = Y[:, self.fidx].T
-        self.B[:, a:b] = (Y[:, self.bidx] != 0.0).T
-        self.C[:, a:b] = Y[:, self.cidx].T  # (as ``astype(np.int64)``)
+        split_block(Y, a, self.fidx, self.F, self.bidx, self.B, self.cidx, self.C)
         if self.sys_j is not None:
             r = np.flatnonzero(Y[:, self.sys_j] != 0.0)
             if r.size:
@@ -824,6 +822,27 @@ class _FrameColumns:
             else:  # "reason"
                 new[name] = _reasons(mon, log, state, t_raw, EX)
         return new
+
+
+@njit_nort
+def split_block(Y, a, fidx, F, bidx, B, cidx, C):
+    """Rows ``0 .. m - 1`` of the loop's block ``Y`` (rows x outputs) into columns
+    ``a .. a + m - 1`` of the output rows: ``F[i] = Y[:, fidx[i]]``, ``B[i] = Y[:,
+    bidx[i]] != 0`` and ``C[i] = Y[:, cidx[i]]`` as integers (truncated, as numpy's
+    ``astype``); one pass, no temporaries."""
+    m = Y.shape[0]
+    for i in range(fidx.size):
+        j = fidx[i]
+        for r in range(m):
+            F[i, a + r] = Y[r, j]
+    for i in range(bidx.size):
+        j = bidx[i]
+        for r in range(m):
+            B[i, a + r] = Y[r, j] != 0.0
+    for i in range(cidx.size):
+        j = cidx[i]
+        for r in range(m):
+            C[i, a + r] = int(Y[r, j])
 
 
 def chunk_buffers(k: MonitorKernel, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -984,3 +1003,5 @@ def warm_monitor() -> None:
         x = np.full(len(k.in_cols), math.nan)
         k.step(x, np.empty(len(k.out_cols)))
         k.run(x[None, :])
+        cols = _FrameColumns(k, 1)
+        cols.take(np.zeros((1, len(k.out_cols))), 0, 1)
