@@ -59,3 +59,52 @@ def test_console_script_output_equals_in_process_run(tmp_path, clean_walk) -> No
     assert a.num_rows == b.num_rows == 20_000
     assert [c for c in a.column_names if not a[c].equals(b[c])] == []
     assert inproc.read_bytes() == script.read_bytes()
+
+
+def _thp_eligible(a) -> bool | None:
+    """Whether the kernel may back ``a``'s memory with huge pages (``THPeligible`` of the
+    mapping holding its middle in /proc/self/smaps: numpy hints only the part aligned to
+    huge pages, a mapping of its own), None where that is not known."""
+    try:
+        text = Path("/proc/self/smaps").read_text()
+    except OSError:
+        return None
+    addr = a.__array_interface__["data"][0] + a.nbytes // 2
+    inside = False
+    for line in text.splitlines():
+        head = line.split()[0] if line else ""
+        if "-" in head and ":" not in head:
+            lo, hi = (int(v, 16) for v in head.split("-"))
+            inside = lo <= addr < hi
+        elif inside and line.startswith("THPeligible:"):
+            return line.split()[1] == "1"
+    return None
+
+
+def test_small_pages_scopes_numpys_huge_page_hint() -> None:
+    """Inside ``small_pages`` numpy gives its arrays no huge-page hint (where Linux only
+    backs hinted memory with huge pages, the array's mapping is not eligible), and
+    numpy's setting is back afterwards, also after an exception."""
+    import numpy as np
+    from numpy._core.multiarray import _set_madvise_hugepage
+
+    from grfguard._memory import small_pages
+
+    def setting() -> bool:
+        v = _set_madvise_hugepage(True)
+        _set_madvise_hugepage(v)
+        return v
+
+    before = setting()
+    with small_pages():
+        assert setting() is False
+        inside = np.ones(8 << 20)  # 64 MB: its own mapping
+    assert setting() is before
+    with pytest.raises(RuntimeError), small_pages():
+        raise RuntimeError("boom")
+    assert setting() is before
+    outside = np.ones(8 << 20)
+    mode = Path("/sys/kernel/mm/transparent_hugepage/enabled")
+    if before and mode.is_file() and "[madvise]" in mode.read_text():
+        assert _thp_eligible(inside) is False
+        assert _thp_eligible(outside) is True

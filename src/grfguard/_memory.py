@@ -22,8 +22,10 @@ from __future__ import annotations
 import ctypes
 import gc
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
-__all__ = ["batch_process", "keep_freed_memory"]
+__all__ = ["batch_process", "keep_freed_memory", "small_pages"]
 
 #: ``mallopt`` parameters (glibc's malloc.h) and the values set.
 _M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3
@@ -77,3 +79,30 @@ def keep_freed_memory() -> bool:
 def freed_memory_kept() -> bool:
     """Whether :func:`keep_freed_memory` is in effect in this process."""
     return _kept
+
+
+@contextmanager
+def small_pages() -> Iterator[None]:
+    """numpy arrays allocated inside get no transparent-huge-page hint.
+
+    numpy asks Linux for huge pages (``madvise(MADV_HUGEPAGE)``) for every array of 4 MB
+    or more. Where the kernel compacts memory for such a request on the spot (``defrag``
+    set to ``madvise``, the default of Debian and Ubuntu) and free huge pages are
+    scarce, the first touch of the array stalls: ``Monitor.run``'s first call in a
+    process on a 10-minute log took 2.97-3.57 s instead of 1.38-1.40 s (fresh processes
+    alternated, BENCHMARKS "Issue 11 status (2026-11-28, session 31)"). The outputs of
+    a batch run are written once, front to back: small pages cost them little.
+
+    numpy's setting is process-wide; it is restored on exit (an array another thread
+    allocates meanwhile gets no hint either, which changes nothing else). Without
+    numpy's switch (other versions, other systems) this does nothing."""
+    try:
+        from numpy._core.multiarray import _set_madvise_hugepage as setter
+    except ImportError:  # pragma: no cover - numpy 2.x has it (a private function)
+        yield
+        return
+    before = setter(False)
+    try:
+        yield
+    finally:
+        setter(before)
