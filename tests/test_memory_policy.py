@@ -14,14 +14,22 @@ from grfguard.io.logio import write_log
 
 CHECK = r"""
 import pyarrow as pa
+from numpy._core.multiarray import _set_madvise_hugepage
+def hint():
+    v = _set_madvise_hugepage(True)
+    _set_madvise_hugepage(v)
+    return v
 before = pa.default_memory_pool().backend_name
+hint_before = hint()
 import grfguard.cli, grfguard.io.logio  # importing changes nothing
 from grfguard import _memory
 assert pa.default_memory_pool().backend_name == before, "import changed the pool"
+assert hint() == hint_before, "import changed numpy's huge-page hint"
 assert not _memory.freed_memory_kept()
 import gc
 assert gc.isenabled()
 _memory.batch_process()
+assert hint() is False, "batch_process left numpy's huge-page hint on"
 assert not gc.isenabled()
 assert _memory.keep_freed_memory() is True  # (again: nothing more)
 assert _memory.freed_memory_kept()

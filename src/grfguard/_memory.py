@@ -1,6 +1,7 @@
 """The memory policy of ``grfguard run``: freed memory is kept and reused, not handed
-back to the system and page-faulted again, and the cyclic garbage collector is off
-(:func:`batch_process`).
+back to the system and page-faulted again, numpy asks for no huge pages, and the cyclic
+garbage collector is off (:func:`batch_process`); and :func:`small_pages`, the huge-page
+part alone for a scope (``Monitor.run``'s outputs).
 
 A 10-minute log's run allocates about 700 MB over its life: the decoded input columns,
 the Parquet reader's scratch, the output blocks, the writer's encoding buffers. By
@@ -12,9 +13,20 @@ page zeroing was 0.3-2 s of system time per run (a third of the command at worst
 what is freed (no trimming of its heap, arrays up to 32 MB from the heap), so a phase
 reuses the memory of the one before: BENCHMARKS.md, "Memory reuse in grfguard run".
 
+Huge pages: numpy hints Linux to back every array of 4 MB or more with huge pages
+(``madvise(MADV_HUGEPAGE)``). Their first touch can cost far more than that of small
+pages: the kernel may compact memory for them on the spot (``defrag`` set to
+``madvise``, Debian's and Ubuntu's default), and in a virtual machine that reports free
+memory to its host (virtio-balloon free page reporting, e.g. Firecracker; the
+benchmark machine) the free 2 MB blocks huge pages are cut from are the ones the host
+took back. ``grfguard run`` on a 2-minute Talos log: 2.95-3.28 s with the hint, 2.17-2.54
+s without (system time 0.9-1.2 s -> 0.5 s); on SURALP logs no difference (BENCHMARKS
+"Issue 11 status (2026-11-28, session 31)").
+
 This is a process-wide setting for a short batch command, applied by the console script
 only (:func:`grfguard.cli.main` for ``grfguard run``); importing grfguard never changes
-the allocator or the collector. Where the C library is not glibc nothing is changed.
+the allocator, numpy's hint or the collector. Where the C library is not glibc, the
+allocator is left as it is.
 """
 
 from __future__ import annotations
@@ -22,7 +34,7 @@ from __future__ import annotations
 import ctypes
 import gc
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 __all__ = ["batch_process", "keep_freed_memory", "small_pages"]
@@ -42,11 +54,25 @@ _kept = False
 
 def batch_process() -> None:
     """The settings of a short batch command over a whole log (``grfguard run``): freed
-    memory kept for reuse (:func:`keep_freed_memory`) and the cyclic garbage collector
-    off (reference counting frees the run's objects; the collector would only walk the
-    imported modules' objects again and again: 0.096 s on a 10-minute log)."""
+    memory kept for reuse (:func:`keep_freed_memory`), no huge-page hint from numpy
+    (module docstring), and the cyclic garbage collector off (reference counting frees
+    the run's objects; the collector would only walk the imported modules' objects again
+    and again: 0.096 s on a 10-minute log)."""
     gc.disable()
     keep_freed_memory()
+    setter = _hugepage_setter()
+    if setter is not None:
+        setter(False)
+
+
+def _hugepage_setter() -> Callable[[bool], bool] | None:
+    """numpy's switch of its huge-page hint (``_set_madvise_hugepage(enabled) ->
+    previous``), None where numpy has none."""
+    try:
+        from numpy._core.multiarray import _set_madvise_hugepage
+    except ImportError:  # pragma: no cover - numpy 2.x has it (a private function)
+        return None
+    return _set_madvise_hugepage
 
 
 def keep_freed_memory() -> bool:
@@ -95,10 +121,9 @@ def small_pages() -> Iterator[None]:
 
     numpy's setting is process-wide; it is restored on exit (an array another thread
     allocates meanwhile gets no hint either, which changes nothing else). Without
-    numpy's switch (other versions, other systems) this does nothing."""
-    try:
-        from numpy._core.multiarray import _set_madvise_hugepage as setter
-    except ImportError:  # pragma: no cover - numpy 2.x has it (a private function)
+    numpy's switch (other versions) this does nothing."""
+    setter = _hugepage_setter()
+    if setter is None:  # pragma: no cover
         yield
         return
     before = setter(False)
