@@ -84,6 +84,37 @@ def _batch(mon: Monitor, log: pd.DataFrame) -> tuple[float, float]:
     return best
 
 
+_FIRST = """
+import sys, time
+from grfguard.detect import Monitor
+from grfguard.io.logio import read_log
+log = read_log(sys.argv[1])
+mon = Monitor.for_log(log)
+mon.run(log.iloc[:100])  # kernels loaded from the cache, columns checked
+c = time.process_time()
+mon.run(log)
+print((time.process_time() - c) / len(log) * 1e6)
+"""
+
+
+def _first_runs(log: pd.DataFrame, n: int = 3) -> list[float]:
+    """CPU µs/sample of the first full ``Monitor.run`` in ``n`` fresh processes (what a
+    script that loads a log and runs it once sees: the outputs' memory is touched for the
+    first time in the process)."""
+    import subprocess
+    import sys
+    import tempfile
+
+    from grfguard.io.logio import write_log
+
+    with tempfile.TemporaryDirectory() as d:
+        path = f"{d}/log.parquet"
+        write_log(log, path)
+        return [float(subprocess.run([sys.executable, "-c", _FIRST, path], check=True,
+                                     capture_output=True, text=True).stdout.split()[-1])
+                for _ in range(n)]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=100_000, help="streamed samples (compiled)")
@@ -131,6 +162,7 @@ def main() -> None:
 
     ref_us = reference_us()
     touch = fresh_touch_ms(48)  # (the child inherits this process's core)
+    first = _first_runs(raw)
     stages = stage_table(suralp_stages(raw), talos_stages(), ref_us)
     load1 = os.getloadavg()[0]
     body = "\n".join([
@@ -142,9 +174,11 @@ def main() -> None:
         "settings (standing layer on). Kernels warmed up first "
         f"(`warm_up()`: {t_warm:.1f} s in this process). The first touch of 48 MB of "
         f"fresh memory in a fresh process took {touch:.0f} ms in this run "
-        "(`_common.fresh_touch_ms`; `Monitor.run` writes its 77 output columns, 37 MB per "
-        "minute of log, into fresh memory: on a virtual machine its figure moves with "
-        "this one, the compiled loop's does not).",
+        "(`_common.fresh_touch_ms`, numpy's huge-page hint on; `Monitor.run` writes the "
+        "columns it returns, 25 MB per minute of log, into fresh memory without that hint, "
+        "`grfguard._memory.small_pages`). The first full `Monitor.run` of the raw log in "
+        "a fresh process (kernels loaded, nothing else run): "
+        + ", ".join(f"{v:.2f}" for v in first) + " µs/sample of CPU in three processes.",
         "",
         "Streaming, one sample per call (wall clock per call):",
         "",

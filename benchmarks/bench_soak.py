@@ -13,7 +13,7 @@ The tile boundaries join the end of a walk to the start of the next one: the rob
 pose jumps there (as after a real gap without a time gap), which the soak also covers.
 
 Usage:
-    nice -n 10 .venv/bin/python benchmarks/bench_soak.py [--minutes 60] [--every 60000]
+    taskset -c 1 .venv/bin/python benchmarks/bench_soak.py [--minutes 60] [--every 60000]
         [--no-compare] [--no-write] [--progress FILE]
 """
 
@@ -126,15 +126,19 @@ def main() -> None:
     equal = None
     if not a.no_compare:
         log = tiled(tile, n)
+        import resource
+
         t1 = time.perf_counter()
         batch = Monitor.for_log(log).run(log)
         t_run = time.perf_counter() - t1
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
         bk = np.stack([batch[c].map(kinds).to_numpy() for c in kcols], axis=1)
         equal = {
             "flags": bool((batch[fcols].to_numpy(dtype=bool) == flags).all()),
             "kinds": bool((bk == kind).all()),
             "recovered_max_abs_diff_n": float(np.nanmax(np.abs(batch[rcols].to_numpy() - rec))),
             "run_s": round(t_run, 1),
+            "peak_rss_mb": round(peak, 1),
         }
         print(json.dumps(equal), flush=True)
     rss = [c["rss_mb"] for c in checkpoints]
@@ -158,12 +162,15 @@ def main() -> None:
             for c in checkpoints)
         eq = ("not compared" if equal is None else
               f"flags equal: {equal['flags']}, kinds equal: {equal['kinds']}, recovered "
-              f"max |diff| {equal['recovered_max_abs_diff_n']:.3g} N (run() took "
-              f"{equal['run_s']} s)")
+              f"max |diff| {equal['recovered_max_abs_diff_n']:.3g} N (`run()` took "
+              f"{equal['run_s']} s; the process's peak RSS after it, the tiled log and its "
+              f"output frame in memory: {equal['peak_rss_mb'] / 1024:.1f} GB)")
         body = (
-            f"Command: `nice -n 10 .venv/bin/python benchmarks/bench_soak.py --minutes "
-            f"{a.minutes:g}` ({n:,} samples streamed through `Monitor.update` with the "
-            "VFS in the loop; a 60 s simulated walk tiled with continuous time).\n\n"
+            f"Command: `taskset -c 1 .venv/bin/python benchmarks/bench_soak.py --minutes "
+            f"{a.minutes:g} --every {a.every}` ({n:,} samples streamed through `Monitor.update`, the dict "
+            "call, with the compiled virtual sensor inside (the `Monitor.for_log` default); "
+            "a 60 s simulated walk tiled with continuous time; "
+            f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC, 2-core machine).\n\n"
             f"RSS {rss[0]:.1f} MB at the first checkpoint, {rss[-1]:.1f} MB at the last "
             f"(growth over the second half {summary['rss_growth_second_half_mb']:+.2f} MB; "
             "the output arrays are preallocated). Time per sample "
