@@ -168,7 +168,8 @@ def main() -> None:
         body = (
             f"Command: `taskset -c 1 .venv/bin/python benchmarks/bench_soak.py --minutes "
             f"{a.minutes:g} --every {a.every}` ({n:,} samples streamed through "
-            "`Monitor.update`, the dict call, with the compiled virtual sensor inside (the `Monitor.for_log` default); "
+            "`Monitor.update`, the dict call, with the compiled virtual sensor inside "
+            "(the `Monitor.for_log` default); "
             "a 60 s simulated walk tiled with continuous time; "
             f"{time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC, 2-core machine).\n\n"
             f"RSS {rss[0]:.1f} MB at the first checkpoint, {rss[-1]:.1f} MB at the last "
