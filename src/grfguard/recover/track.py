@@ -186,16 +186,22 @@ def track_recovered(output: pd.DataFrame, weight_n: float, noise_n: float,
     Raises:
         ConfigError: A setting is not a finite number > 0.
     """
+    from grfguard.io.logio import without_attrs
+
     cfg = TrackConfig(noise_n=float(noise_n), weight_n=float(weight_n), acc_psd=acc_psd)
+    attrs = output.attrs
+    output = without_attrs(output)  # pandas deep-copies the metadata on every access
     if dt_s is None:
         t = output["time"].to_numpy(dtype=float)
         dt_s = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     alpha, beta = alpha_beta_gains(dt_s, cfg)
     names = list(sensors) if sensors is not None else [
         c[len("recovered_"):] for c in output.columns if c.startswith("recovered_")]
-    out = output.copy()
+    out = output.copy(deep=False)  # (copy on write: the caller's frame stays as it is)
     for s in names:
         flag = output[f"flag_{s}"].to_numpy(dtype=bool)
+        if not flag.any():
+            continue
         sel = flag & output[f"kind_{s}"].astype(str).isin(TRACKED_KINDS).to_numpy()
         if not sel.any():
             continue
@@ -205,5 +211,5 @@ def track_recovered(output: pd.DataFrame, weight_n: float, noise_n: float,
         new = rec.copy()
         new[sel] = tracked[sel]
         out[f"recovered_{s}"] = new
-    out.attrs = dict(output.attrs)
+    out.attrs = dict(attrs)
     return out
