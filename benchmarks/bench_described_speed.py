@@ -75,22 +75,14 @@ STAGES = {
 
 #: Analysis written with the figures (by hand; re-runs keep it).
 NOTES = """
-What changed (session 27, 2026-11-27; "before" = main 4e26698): the hinge kernels'
-per-body stages run eight samples at once in vector lanes (`grfguard.kernels.lanes`: a
-numba type for an LLVM `<8 x double>`; the same functions `_ht_pose`, `_ht_motion`,
-`_ht_force` compiled for vectors, each lane the IEEE operations of the scalar code);
-the sines and cosines are written in the lanes' order. numba's own vectoriser had left
-these loops scalar (the bodies' rows share one array, so it cannot prove that a store
-does not alias a later load). Outputs bit-identical (last column: 0); the inverse
-dynamics and the first kinematics about 2x faster, everything else unchanged.
-
-Where the Talos sample goes now ("after" column): the inverse dynamics about 0.75 µs
-(of which the per-sample ground and F/T wrenches after the lanes 0.12, gathering the
-rates and the base motion into lanes and the sines and cosines 0.2-0.3, the vector
-stages 0.4), the Savitzky-Golay filters 0.65, the channel monitor 0.6 (its kernel 0.1;
-the output columns, 12 of them text, the rest), the first kinematics 0.2, the rest of
-`estimate_wrenches` with the base motion, attitude and stance weights about 0.6, the
-frame assembly 0.2.
+What changed (session 31, 2026-11-28; "before" = `git archive 30d999c`, the session's
+start plus the demo's figure message): Talos: `ChannelMonitor.run`'s compiled loop writes column-major outputs, which the frame
+takes without a copy, and its kind columns come from `grfguard.io.codes` (alternated in
+one process: 0.477 -> 0.379 µs/sample). G1: `track_recovered` no longer deep-copies the
+whole frame and, on every column access, its metadata (0.58 -> 0.10 µs/sample), and
+`Monitor.run` writes its outputs block by block. The wrench stages' code did not change:
+their before/after differences here (Talos' Savitzky-Golay filters 0.79 -> 0.50) are the
+machine between the two processes. Outputs bit-identical (last column: 0).
 
 Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
 kinematics included): see "Issue 11 status" for the verdict over the session; this run's
