@@ -76,13 +76,14 @@ STAGES = {
 #: Analysis written with the figures (by hand; re-runs keep it).
 NOTES = """
 What changed (session 31, 2026-11-28; "before" = `git archive 30d999c`, the session's
-start plus the demo's figure message): Talos: `ChannelMonitor.run`'s compiled loop writes column-major outputs, which the frame
-takes without a copy, and its kind columns come from `grfguard.io.codes` (alternated in
-one process: 0.477 -> 0.379 µs/sample). G1: `track_recovered` no longer deep-copies the
-whole frame and, on every column access, its metadata (0.58 -> 0.10 µs/sample), and
-`Monitor.run` writes its outputs block by block. The wrench stages' code did not change:
-their before/after differences here (Talos' Savitzky-Golay filters 0.79 -> 0.50) are the
-machine between the two processes. Outputs bit-identical (last column: 0).
+start plus the demo's figure message): Talos: `ChannelMonitor.run`'s compiled loop
+writes column-major outputs, which the frame takes without a copy, and its kind columns
+come from `grfguard.io.codes` (alternated in one process: 0.477 -> 0.379 µs/sample). G1:
+`track_recovered` no longer deep-copies the whole frame and, on every column access, its
+metadata (0.58 -> 0.10 µs/sample), and `Monitor.run` writes its outputs block by block.
+The wrench stages' code did not change: their before/after differences here (Talos'
+Savitzky-Golay filters 0.79 -> 0.50) are the machine between the two processes. Outputs
+bit-identical (last column: 0).
 
 Target (issue 11, must-show 2, second half: batch >= 300 k samples/s on a 30-joint robot,
 kinematics included): see "Issue 11 status" for the verdict over the session; this run's
