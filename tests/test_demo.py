@@ -16,8 +16,8 @@ def test_demo_writes_what_it_announces(tmp_path) -> None:
     out = tmp_path / "out"
     res = CliRunner().invoke(app, ["demo", "--out", str(out), "--duration", "8"])
     assert res.exit_code == 0, res.output
-    text = " ".join(res.output.split())  # rich wraps long paths
-    found = re.findall(r"(\d+) in (\S+?)(?:,|$| report)", text.split("figures: ")[1])
+    text = "".join(res.output.split())  # rich wraps long paths, even inside a word
+    found = re.findall(r"(\d+)in(/\S+?)(?=,\d+in/|report:|$)", text.split("figures:")[1])
     counts = {folder: n for n, folder in found}
     assert set(counts) == {str(out / d) for d in ("figures", "figures_zoom", "figures_paper")}
     for folder, n in counts.items():
