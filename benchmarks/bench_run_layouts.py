@@ -8,11 +8,13 @@ printed too):
 
 * the compiled loop over the whole log already in one row-major array, output row-major
   (``monitor_run_packed``: no chunk, the lower bound of the loop);
-* :func:`grfguard.kernels.monitor.run_rows` as ``Monitor.run`` calls it (input columns
-  copied chunk by chunk into a column-major buffer of 4,096 rows), with the input
-  buffer's rows padded to an odd number of cache lines (``chunk_buffers``) or not
-  (4,096 floats: every column's value of a sample 32 kB from the next, one L1 set), into a
-  column-major output (``Monitor.run``'s) or a row-major one;
+* :func:`grfguard.kernels.monitor.run_rows` over the whole log (input columns copied
+  chunk by chunk into a column-major buffer of 4,096 rows), with the input buffer's rows
+  padded to an odd number of cache lines (``chunk_buffers``) or not (4,096 floats: every
+  column's value of a sample 32 kB from the next, one L1 set), into a column-major
+  output (``Monitor.run``'s until session 31) or a row-major one;
+* ``Monitor.run``'s blocks since session 31: chunks of ``RUN_BLOCK`` rows into one reused
+  row-major block, each split into the returned columns (``_FrameColumns``);
 * ``Monitor.run`` whole;
 * two parts of the output frame: the input columns taken from the log and the text
   columns (``kind_<s>``, ``system_state``: :func:`grfguard.io.codes.codes_to_str`).
@@ -77,10 +79,23 @@ def _variants(mon: Monitor, log) -> dict:
                 codes_to_str(YF[:, j].astype(np.int64), KIND_NAMES if typ == "kind"
                              else km.SYSTEM_STATES)
 
+    def blocks():
+        bufs = km.chunk_buffers(k, min(km.RUN_BLOCK, n))
+        rows = max(1, bufs[0].shape[1])
+        block = np.empty((rows, m))
+        cols = km._FrameColumns(k, n)
+        k.reset()
+        for a in range(0, n, rows):
+            b = min(n, a + rows)
+            km.run_rows(k, src, a, b, bufs, block[:b - a], EX[a:b])
+            cols.take(block[:b - a], a, b)
+
     loop(YF, True)()
     return {
         "loop, whole log row-major in and out (monitor_run_packed)": packed,
-        "run_rows, padded input chunk, column-major output (Monitor.run's)": loop(YF, True),
+        "blocks of RUN_BLOCK rows, reused row-major block, split (Monitor.run's)": blocks,
+        "run_rows, padded input chunk, column-major output (Monitor.run's before)":
+            loop(YF, True),
         "run_rows, unpadded input chunk (4,096 floats), column-major output": loop(YF, False),
         "run_rows, padded input chunk, row-major output": loop(YC, True),
         "run_rows, unpadded input chunk, row-major output": loop(YC, False),

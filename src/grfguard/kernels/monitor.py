@@ -831,8 +831,8 @@ class _FrameColumns:
 def split_block(Y, a, fidx, F, bidx, B, cidx, C):
     """Rows ``0 .. m - 1`` of the loop's block ``Y`` (rows x outputs) into columns
     ``a .. a + m - 1`` of the output rows: ``F[i] = Y[:, fidx[i]]``, ``B[i] = Y[:,
-    bidx[i]] != 0`` and ``C[i] = Y[:, cidx[i]]`` as integers (truncated, as numpy's
-    ``astype``); one pass, no temporaries."""
+    bidx[i]] != 0`` and ``C[i] = Y[:, cidx[i]]`` as integers (codes: whole numbers, the
+    same as numpy's ``astype``); one pass, no temporaries."""
     m = Y.shape[0]
     for i in range(fidx.size):
         j = fidx[i]
