@@ -19,9 +19,9 @@ pages: the kernel may compact memory for them on the spot (``defrag`` set to
 ``madvise``, Debian's and Ubuntu's default), and in a virtual machine that reports free
 memory to its host (virtio-balloon free page reporting, e.g. Firecracker; the
 benchmark machine) the free 2 MB blocks huge pages are cut from are the ones the host
-took back. ``grfguard run`` on a 2-minute Talos log: 2.95-3.28 s with the hint, 2.17-2.54
-s without (system time 0.9-1.2 s -> 0.5 s); on SURALP logs no difference (BENCHMARKS
-"Issue 11 status (2026-11-28, session 31)").
+took back. ``grfguard run`` on a 2-minute Talos log: 2.95-3.28 s with the hint, 2.06-2.42
+s with :func:`batch_process` turning it off (system time 0.9-1.2 s -> 0.5 s); on SURALP
+logs no difference (BENCHMARKS "Issue 11 status (2026-11-28, session 31)").
 
 This is a process-wide setting for a short batch command, applied by the console script
 only (:func:`grfguard.cli.main` for ``grfguard run``); importing grfguard never changes
@@ -112,12 +112,13 @@ def small_pages() -> Iterator[None]:
     """numpy arrays allocated inside get no transparent-huge-page hint.
 
     numpy asks Linux for huge pages (``madvise(MADV_HUGEPAGE)``) for every array of 4 MB
-    or more. Where the kernel compacts memory for such a request on the spot (``defrag``
-    set to ``madvise``, the default of Debian and Ubuntu) and free huge pages are
-    scarce, the first touch of the array stalls: ``Monitor.run``'s first call in a
-    process on a 10-minute log took 2.97-3.57 s instead of 1.38-1.40 s (fresh processes
-    alternated, BENCHMARKS "Issue 11 status (2026-11-28, session 31)"). The outputs of
-    a batch run are written once, front to back: small pages cost them little.
+    or more. Where their first touch is slow (module docstring: memory compacted on the
+    spot, or a virtual machine whose balloon gave the free blocks back to its host), the
+    arrays' first use stalls: ``Monitor.run``'s first call in a process on a 10-minute
+    log took 2.97-3.57 s with the hint and 1.35-1.54 s with its outputs allocated in
+    this scope (fresh processes, BENCHMARKS "Issue 11 status (2026-11-28, session 31)");
+    later calls took the same time either way. The outputs of a batch run are written
+    once, front to back: small pages cost them little.
 
     numpy's setting is process-wide; it is restored on exit (an array another thread
     allocates meanwhile gets no hint either, which changes nothing else). Without

@@ -302,7 +302,8 @@ def warm() -> None:
     outs = (np.zeros((2, 1), np.bool_), np.zeros((2, 1), np.int8), np.zeros((2, 1)),
             np.zeros((2, 1)), np.zeros((2, 1)))
     prm = np.ones(N_PRM)
-    # ChannelMonitor.run writes column-major outputs (2 x 2: not C-contiguous as well)
+    # ChannelMonitor.run writes column-major outputs (a 2 x 2 transpose is F-contiguous
+    # only; numba would type a single column as C-contiguous)
     channels_run(t, c, c, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm, fst, ist, exc,
                  gate, *(np.zeros((2, 2), a.dtype).T for a in outs))
     channels_sample(0, 0.0, True, False, X, X, np.zeros(1, np.int64), np.ones((1, 2)), prm,
