@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import sys
 import time
 import tracemalloc
@@ -126,8 +127,6 @@ def main() -> None:
     equal = None
     if not a.no_compare:
         log = tiled(tile, n)
-        import resource
-
         t1 = time.perf_counter()
         batch = Monitor.for_log(log).run(log)
         t_run = time.perf_counter() - t1
