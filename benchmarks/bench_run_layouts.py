@@ -80,15 +80,8 @@ def _variants(mon: Monitor, log) -> dict:
                              else km.SYSTEM_STATES)
 
     def blocks():
-        bufs = km.chunk_buffers(k, min(km.RUN_BLOCK, n))
-        rows = max(1, bufs[0].shape[1])
-        block = np.empty((rows, m))
-        cols = km._FrameColumns(k, n)
         k.reset()
-        for a in range(0, n, rows):
-            b = min(n, a + rows)
-            km.run_rows(k, src, a, b, bufs, block[:b - a], EX[a:b])
-            cols.take(block[:b - a], a, b)
+        km.run_blocks(k, src, n)
 
     loop(YF, True)()
     return {

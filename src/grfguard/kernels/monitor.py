@@ -762,18 +762,27 @@ def run_frame(mon: Any, k: MonitorKernel, log: pd.DataFrame, chunk: int = RUN_BL
     with small_pages():  # every array here is fresh memory written once
         log = log.copy(deep=False)
         log.attrs = {}  # column access would deep-copy the metadata every time
-        n = len(log)
         src = [(_column(log, c) if c in log.columns else None) for c in k.in_cols]
-        bufs = chunk_buffers(k, min(chunk, n))
-        rows = max(1, bufs[0].shape[1])
-        block = np.empty((rows, len(k.out_cols)))
-        cols = _FrameColumns(k, n)
-        EX = np.empty((n, N_EX))
-        for a in range(0, n, rows):
-            b = min(n, a + rows)
-            run_rows(k, src, a, b, bufs, block[:b - a], EX[a:b])
-            cols.take(block[:b - a], a, b)
+        cols, EX = run_blocks(k, src, len(log), chunk)
         return _with_columns(log, cols.columns(mon, log, src[0], EX))
+
+
+def run_blocks(k: MonitorKernel, src: list[Any], n: int, chunk: int = RUN_BLOCK
+               ) -> tuple[_FrameColumns, np.ndarray]:
+    """The compiled loop over the ``n`` rows of the input columns ``src`` (as in
+    :func:`run_rows`) in blocks of ``chunk`` rows, each split into the returned columns:
+    those columns (:class:`_FrameColumns`) and the per-sample extras (``n`` x
+    :data:`N_EX`)."""
+    bufs = chunk_buffers(k, min(chunk, n))
+    rows = max(1, bufs[0].shape[1])
+    block = np.empty((rows, len(k.out_cols)))
+    cols = _FrameColumns(k, n)
+    EX = np.empty((n, N_EX))
+    for a in range(0, n, rows):
+        b = min(n, a + rows)
+        run_rows(k, src, a, b, bufs, block[:b - a], EX[a:b])
+        cols.take(block[:b - a], a, b)
+    return cols, EX
 
 
 class _FrameColumns:
