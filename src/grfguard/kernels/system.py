@@ -58,8 +58,8 @@ from grfguard.kernels.vfs import (
 from grfguard.model.robot import SENSOR_NAMES
 
 __all__ = ["N_SYSP", "N_SYSS", "OUT_COLUMNS", "system_params", "system_reset",
-           "sys_pre_vfs", "sys_twin_prepare", "sys_twin", "sys_pre_detect", "sys_output",
-           "reason_text"]
+           "sys_pre_vfs", "sys_twin_prepare", "sys_twin", "sys_keep", "sys_resume",
+           "sys_pre_detect", "sys_output", "reason_text"]
 
 # ------------------------------------------------------------------ parameters (sysp)
 (Y_ON, Y_DT, Y_W) = range(3)
@@ -378,11 +378,13 @@ def sys_pre_vfs(yp, ys, xc, cf, ci, vws, viws):
 # ------------------------------------------------------------------ vibration, twin VFS
 @njit(inline="always")
 def _vibration(yp, ys, ax, ay):
-    """``AccVibrationDetector.update``; returns ``on``."""
+    """``AccVibrationDetector.update``; returns ``(on, switched on at this sample)``
+    (the switch's effect on the fits, ``Monitor._vibration_on``, is the detector side's:
+    :func:`sys_resume`)."""
     if ys[S_VON] != 0.0:
-        return True
+        return True, False
     if not (math.isfinite(ax) and math.isfinite(ay)):
-        return False
+        return False, False
     b0, b1, b2, a1, a2 = yp[Y_V_B0], yp[Y_V_B1], yp[Y_V_B2], yp[Y_V_A1], yp[Y_V_A2]
     e = 0.0
     for j in range(2):
@@ -399,8 +401,8 @@ def _vibration(yp, ys, ax, ay):
     ys[S_VRMS] = math.sqrt(ys[S_VMS])
     if ys[S_VT] >= yp[Y_V_START] and ys[S_VRMS] > yp[Y_V_LIMIT]:
         ys[S_VON] = 1.0
-        ys[S_TSETTLE] = 1.0  # Monitor._vibration_on: the fits settle again
-    return ys[S_VON] != 0.0
+        return True, True
+    return False, False
 
 
 @njit(inline="always")
@@ -427,18 +429,20 @@ def sys_twin_prepare(yp, ys, reset, vstate, qstate, ci):
 
 
 @njit(inline="always")
-def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws, vstate, vws,
-             v, tot, cest, o_tot, o_cest, o_valid):
+def sys_twin(yp, ys, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws, vstate, vws, v,
+             tot, cest, o_tot, o_cest, o_valid):
     """The twin virtual sensor without the accelerometer (reset at a break by
     :func:`sys_twin_prepare`; with ``share`` and a valid main sample it takes the main's
     front of the step, state ``vstate`` / scratch ``vws``), the vibration switch; once on,
-    the twin's outputs replace ``vy``, ``v``, ``tot``, ``cest`` and the corner threshold is
-    widened (before that the twin's outputs are not computed, only its filters run).
-    Returns the sample's ``valid``."""
+    the twin's outputs replace ``vy``, ``v``, ``tot``, ``cest`` (before that the twin's
+    outputs are not computed, only its filters run; the corner threshold is widened by
+    :func:`sys_resume`).
+    Returns the sample's ``(valid, on, switched on now)``; the last two go to
+    :func:`sys_resume` (the detector's side of the switch)."""
     if yp[Y_V_ON] == 0.0:
-        return valid
+        return valid, False, False
     ia = int(yp[Y_I_ACC])
-    on = _vibration(yp, ys, xc[ia], xc[ia + 1])  # (reads neither sensor)
+    on, now = _vibration(yp, ys, xc[ia], xc[ia + 1])  # (reads neither sensor)
     if share and valid:  # the twin's outputs computed only when used
         vfs_step_shared(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws, vstate, vws, on)
         ys[S_SYNC] = 1.0
@@ -449,7 +453,7 @@ def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws,
         resolve_pending(qy, qstate, qcf, qci, qws, qiws)
         vfs_step(xc[9:9 + 24], qy, qstate, qcf, qci, qws, qiws)
     if not on:
-        return valid
+        return valid, False, False
     for j in range(qy.shape[0]):
         vy[j] = qy[j]
     for i in range(8):
@@ -457,8 +461,44 @@ def sys_twin(yp, ys, prm, xc, share, valid, vy, qy, qstate, qcf, qci, qws, qiws,
     for f in range(2):
         tot[f] = qy[o_tot + f]
         cest[f] = qy[o_cest + f]
-    prm[P_CORSIG] = yp[Y_CORSIG_Q]
-    return qy[o_valid] == 1.0
+    return qy[o_valid] == 1.0, True, now
+
+
+#: Floats of :func:`sys_keep`: what the sensor side of a sample leaves in the layer's
+#: state for its detector side (tilt now, gyro bias, vibration on and RMS).
+N_KEEP = 7
+
+
+@njit(inline="always")
+def sys_keep(ys, r):
+    """After the sensor side of a sample (:func:`sys_pre_vfs`, :func:`sys_twin`): the
+    state its detector side reads (:func:`sys_pre_detect`, :func:`sys_output`) into
+    ``r`` (:data:`N_KEEP` floats), so that the sensor side of later samples may run
+    before it (the batch loop's two passes)."""
+    r[0] = ys[S_TNOW]
+    r[1] = ys[S_TNOW + 1]
+    for j in range(3):
+        r[2 + j] = ys[S_BIAS + j]
+    r[5] = ys[S_VON]
+    r[6] = ys[S_VRMS]
+
+
+@njit(inline="always")
+def sys_resume(yp, ys, prm, r, on, now):
+    """Before the detector side of a sample: the state :func:`sys_keep` kept back, and
+    the vibration switch's effect on the detector (``on``: the corner threshold widened;
+    ``now``, switched on at this sample: the fits settle again,
+    ``Monitor._vibration_on``). Only the detector side writes these."""
+    ys[S_TNOW] = r[0]
+    ys[S_TNOW + 1] = r[1]
+    for j in range(3):
+        ys[S_BIAS + j] = r[2 + j]
+    ys[S_VON] = r[5]
+    ys[S_VRMS] = r[6]
+    if now:
+        ys[S_TSETTLE] = 1.0
+    if on:
+        prm[P_CORSIG] = yp[Y_CORSIG_Q]
 
 
 # ------------------------------------------------------------------ before the detector
