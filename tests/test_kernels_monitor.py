@@ -70,3 +70,33 @@ def test_batch_loop_writes_any_memory_order_in_place():
     assert (big[0] == -7.0).all() and (big[m + 1:] == -7.0).all()  # nothing written outside
     assert (big[:, :4] == -7.0).all() and (big[:, n + 4:] == -7.0).all()
     assert (ref[:, k.out_cols.index("system_state")] != 0).any()  # the gap and NaNs seen
+
+
+def test_two_pass_batch_loop_equals_steps_when_the_vibration_switch_latches():
+    """The batch loop runs the sensor side of ``PASS_ROWS`` rows before their detector
+    sides. On a walk whose accelerometer vibrates (the reality gap ``all``), the switch
+    latches inside a pass (the twin's outputs replace the sensor's, the corner threshold
+    widens, the fits settle): every output, the system layer's numbers included, has the
+    bits of row-by-row ``MonitorKernel.step``, across missing joints and a time gap."""
+    from grfguard.kernels.monitor import N_EX, PASS_ROWS, monitor_run_packed
+    from grfguard.sim.reality import load_reality
+
+    walk = simulate(SURALP, GaitConfig(duration=3.0), NoiseConfig(), seed=3,
+                    reality=load_reality("all"))
+    log = inject_faults(walk, "r1=frozen:0@1")
+    log.loc[700:704, "q_l_knee"] = np.nan
+    log.loc[1500:, "time"] += 0.2
+    mon = Monitor.for_log(log)
+    k = mon._kernel(True, True)
+    X = np.ascontiguousarray(np.column_stack([
+        log[c].to_numpy(float) if c in log else np.full(len(log), np.nan) for c in k.in_cols
+    ]))
+    k.reset()
+    ref = np.array([k.step(x.copy(), np.empty(len(k.out_cols))).copy() for x in X])
+    k.reset()
+    Y, EX = np.empty_like(ref), np.empty((len(X), N_EX))
+    monitor_run_packed(X, Y, EX, k.F, k.I)
+    assert np.array_equal(Y.view(np.int64), ref.view(np.int64))
+    on = np.flatnonzero(ref[:, k.out_cols.index("mm_vibration")] != 0.0)
+    assert on.size and on[0] % PASS_ROWS not in (0, PASS_ROWS - 1)  # inside a pass
+    assert (ref[:, k.out_cols.index("flag_r1")] != 0.0).any()
