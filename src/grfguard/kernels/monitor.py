@@ -1,8 +1,8 @@
 """The whole default monitor as one compiled step: input guard, time guard, continuity,
 virtual force sensor, detector, recovery and the output guard.
 
-:func:`monitor_step` is :meth:`grfguard.pipeline.Monitor.update` (method ``default``, no
-common-mode layer, no diagnostics) on one row of plain floats, in the same order:
+:func:`monitor_step_packed` is :meth:`grfguard.pipeline.Monitor.update` (method
+``default``, no diagnostics) on one row of plain floats, in the same order:
 
 1. input guard (:class:`~grfguard.guard.InputGuard`): values outside their physical range
    (per-column limits ``lims``) and an IMU quaternion whose norm is not 1 become NaN;
@@ -17,10 +17,10 @@ common-mode layer, no diagnostics) on one row of plain floats, in the same order
 
 Steps 1-3 are the sample's sensor side (:func:`_sense`), 4-5 its detector side
 (:func:`_judge`, after the system layer's corrections); they share state only through the
-sample's record. :func:`monitor_run` loops the same step over a log; the batch loop of
-``Monitor.run`` (:func:`_run_flat`) runs the sensor side of :data:`PASS_ROWS` rows, then
-their detector sides: the same functions on the same values in an order that changes no
-result, so streaming and batch are identical by construction.
+sample's record. The batch loop (:func:`monitor_run_packed`, :func:`_run_flat`) runs the
+sensor side of :data:`PASS_ROWS` rows, then their detector sides: the same compiled
+functions on the same values, in an order that changes no result, so streaming and batch
+are identical by construction.
 
 Row layouts (:func:`input_columns`, :func:`output_columns`):
 
@@ -107,9 +107,8 @@ from grfguard.model.robot import SENSOR_NAMES, SIDES
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["input_columns", "output_columns", "monitor_step",
-           "monitor_run", "MonitorKernel", "update_dict", "run_frame", "dict_to_row",
-           "warm_monitor", "monitor_step_packed", "monitor_run_packed"]
+__all__ = ["input_columns", "output_columns", "MonitorKernel", "update_dict", "run_frame",
+           "dict_to_row", "warm_monitor", "monitor_step_packed", "monitor_run_packed"]
 
 #: Precomputed virtual-sensor columns of the input row (without a sensor inside).
 PRE_VFS_COLUMNS: tuple[str, ...] = (
@@ -131,10 +130,9 @@ _R_V, _R_TOT, _R_CEST, _R_CREF = 0, 8, 10, 12
 _R_VALID, _R_CLOCK, _R_ST, _R_RESET, _R_ON, _R_NOW, _R_RAW, _R_SYS = (
     14, 15, 16, 17, 18, 19, 20, 28)
 N_R = _R_SYS + N_KEEP
-# scratch (ws) layout of monitor_step: detector scratch 0..71, then own slots, then the
-# sample's record (N_R)
-_W_REC, _W_ETA, _W_FLAG, _W_KIND, _W_R = 72, 80, 88, 96, 104
-N_WS = _W_R + N_R
+# scratch (ws) layout of the detector side: detector scratch 0..71, then own slots
+_W_REC, _W_ETA, _W_FLAG, _W_KIND = 72, 80, 88, 96
+N_WS = 104
 #: Rows per pass of the batch loop (:func:`_run_flat`): the sensor side of this many
 #: samples, then their detector side.
 PASS_ROWS = 64
@@ -145,7 +143,7 @@ N_EX = 4
 
 
 def input_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]:
-    """Input row layout of :func:`monitor_step` (with the virtual sensor inside or not;
+    """Input row layout of :func:`monitor_step_packed` (with the virtual sensor inside or not;
     with the system layer: ``zmp_ref_x/y`` appended)."""
     extra = ZMP_REF if with_system else ()
     if with_vfs:
@@ -154,7 +152,7 @@ def input_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]:
 
 
 def output_columns(with_vfs: bool, with_system: bool = False) -> tuple[str, ...]:
-    """Output row layout of :func:`monitor_step` (with the system layer:
+    """Output row layout of :func:`monitor_step_packed` (with the system layer:
     :data:`grfguard.kernels.system.OUT_COLUMNS` appended)."""
     det = (*(f"flag_{s}" for s in SENSOR_NAMES), *(f"kind_{s}" for s in SENSOR_NAMES),
            *(f"eta_{s}" for s in SENSOR_NAMES), *(f"recovered_{s}" for s in SENSOR_NAMES),
@@ -275,28 +273,6 @@ def _finish(raw, yout, o, ss, prm, oflag, okind, eta, rec):
         yout[o + 24 + i] = r
 
 
-@njit_nort
-def monitor_step(xin, yout, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws,
-                 xc, vy, ws, sy):
-    """One row ``xin`` (:func:`input_columns`) into ``yout`` (:func:`output_columns`):
-    its sensor side (:func:`_sense`), then its detector side (:func:`_judge`).
-
-    ``ex`` receives ``(rejected, jump [s], valid, bounded)`` of the sample (what the
-    Python side needs for the ``system_reason`` text). ``mp``: mode (1 = virtual sensor
-    inside), reject implausible, quaternion norm tolerance, quaternion column (-1: none);
-    ``lims`` (2, n_in): physical range per input column (+-inf: not checked);
-    ``ss``/``gs``/``prm``: detector state and parameters; ``sd``/``sp``: the standing
-    layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``: off); ``vstate``/``cf``/``ci``/
-    ``vws``/``viws``: the virtual sensor's (:class:`~grfguard.kernels.vfs.VFSKernel`);
-    ``xc`` (n_in,), ``vy`` (22,), ``ws`` (:data:`N_WS`): scratch. ``sy``: the system
-    layer's ``(sysp, syss, qstate, qcf, qci, qws, qiws, qy)``
-    (:mod:`grfguard.kernels.system`; ``sysp[0] = 0``: off).
-    """
-    r = ws[_W_R:_W_R + N_R]
-    _sense(xin, ex, mp, lims, gs, prm, vstate, cf, ci, vws, viws, xc, vy, r, sy)
-    _judge(yout, ex, mp, ss, gs, prm, sd, sp, ws, sy, xc, vy, r)
-
-
 @njit_nort(inline="always")
 def _sense(xin, ex, mp, lims, gs, prm, vstate, cf, ci, vws, viws, xc, vy, r, sy):
     """The sensor side of a sample: input guard, the system layer's IMU corrections,
@@ -307,7 +283,7 @@ def _sense(xin, ex, mp, lims, gs, prm, vstate, cf, ci, vws, viws, xc, vy, r, sy)
     except through ``xc``, ``vy`` and ``r`` (the system layer's through
     :func:`~grfguard.kernels.system.sys_keep`): the batch loop runs this side for
     :data:`PASS_ROWS` samples, then their detector sides, with the bits of
-    :func:`monitor_step`, sample after sample."""
+    :func:`monitor_step_packed`, sample after sample."""
     mode = mp[_M_MODE]
     rejected = _input_guard(xin, xc, mp, lims)
     sysp, syss, qstate, qcf, qci, qws, qiws, qy = sy  # ---- system layer (kernels/system.py)
@@ -390,17 +366,8 @@ def _judge(yout, ex, mp, ss, gs, prm, sd, sp, ws, sy, xc, vy, r):
     ex[3] = 1.0 if bounded else 0.0
 
 
-@njit_nort
-def monitor_run(X, Y, EX, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
-                ws, sy):
-    """:func:`monitor_step` over every row of ``X`` into ``Y`` and ``EX`` (the batch path)."""
-    for k in range(X.shape[0]):
-        monitor_step(X[k], Y[k], EX[k], mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws,
-                     viws, xc, vy, ws, sy)
-
-
 class MonitorKernel:
-    """State, parameters and scratch of :func:`monitor_step` for one monitor.
+    """State, parameters and scratch of :func:`monitor_step_packed` for one monitor.
 
     Args:
         prm: Detector parameters (:func:`grfguard.kernels.detect.detect_params`).
@@ -616,34 +583,53 @@ def _unpack(F, I):
 
 @njit_nort
 def monitor_step_packed(x, y, F, I):
-    """:func:`monitor_step` with every array in the two buffers of
-    :class:`MonitorKernel` (``F`` floats, ``I`` ints with the layout header)."""
-    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
-    monitor_step(x, y, ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy,
-                 ws, sy)
+    """One row ``x`` (:func:`input_columns`) into ``y`` (:func:`output_columns`): its
+    sensor side (:func:`_sense`), then its detector side (:func:`_judge`). Every array
+    of the step lives in the two buffers of :class:`MonitorKernel` (``F`` floats, ``I``
+    ints with the layout header): ``ex`` receives ``(rejected, jump [s], valid,
+    bounded)`` of the sample (what the Python side needs for the ``system_reason``
+    text); ``mp``: mode (1 = virtual sensor inside), reject implausible, quaternion norm
+    tolerance, quaternion column (-1: none); ``lims`` (2, n_in): physical range per input
+    column (+-inf: not checked); ``ss``/``gs``/``prm``: detector state and parameters;
+    ``sd``/``sp``: the standing layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``:
+    off); ``vstate``/``cf``/``ci``/``vws``/``viws``: the virtual sensor's
+    (:class:`~grfguard.kernels.vfs.VFSKernel`); ``xc`` (n_in,), ``vy`` (22,), ``ws``
+    (:data:`N_WS`): scratch; the system layer's ``(sysp,
+    syss, qstate, qcf, qci, qws, qiws, qy)`` (:mod:`grfguard.kernels.system`; ``sysp[0] =
+    0``: off).
+
+    It is the batch loop (:func:`_run_flat`) over one row, so streaming and batch run
+    one compiled copy of the step (the block kinematics off: the row is posed alone)."""
+    ex = F[I[0]:I[0] + I[1]].reshape((1, I[1]))
+    zero = I[0] - I[0]  # run-time values, not literals: the batch loop's own signature
+    one = zero + 1
+    _run_flat(one, x, zero, x.shape[0], one, y, zero, y.shape[0], one, ex, F, I, ex,
+              zero != 0)
 
 
 @njit_nort
-def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk):
-    """:func:`monitor_step` over ``n`` rows read from and written to flat buffers: input
-    value ``(k, j)`` at ``Xf[xo + k xrs + j xcs]``, output ``(k, j)`` at
+def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk, lanes):
+    """:func:`monitor_step_packed` over ``n`` rows read from and written to flat buffers:
+    input value ``(k, j)`` at ``Xf[xo + k xrs + j xcs]``, output ``(k, j)`` at
     ``Yf[yo + k yrs + j ycs]`` (any memory order: no copy of the chunk before or after),
     the extras into ``EX[k]``. The rows go in passes of :data:`PASS_ROWS`: the sensor
     side of each (:func:`_sense`, its row read through the kernel's row buffer), then the
-    detector side of each (:func:`_judge`); the same bits as :func:`monitor_step` row
-    after row, with each side's code and data hot in the cache for a whole pass (SURALP:
-    about 12 % less CPU time than whole steps). The rows are written in place when the
+    detector side of each (:func:`_judge`); the same bits as :func:`monitor_step_packed`
+    row after row, with each side's code and data hot in the cache for a whole pass
+    (SURALP: about 10 % less CPU time than whole steps). The rows are written in place when the
     output's rows are contiguous; otherwise a block of ``yblk.shape[0]`` rows is written
     into ``yblk`` and then copied out column by column when the columns are the far-apart
     dimension (a column-major ``Y``, as ``Monitor.run``'s: whole cache lines per column
     instead of one value per column and row; about 10 % less CPU time for
-    ``Monitor.run``), row by row otherwise."""
+    ``Monitor.run``), row by row otherwise. ``lanes``: the virtual sensor poses
+    :data:`LANES` rows at a time (:mod:`grfguard.kernels.front`; off: each row alone,
+    the same bits)."""
     ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
     m = I[43]  # output columns (the size of the row buffer ``yrow``)
     P = F[I[_I_PASS]:I[_I_PASS] + I[_I_PASS + 1]]
     direct = ycs == 1  # rows contiguous: written in place
     nbk = max(1, n) if direct else yblk.shape[0]
-    front = mp[_M_MODE] == 1.0 and cf[_P_FRONT_CF] != 0.0
+    front = lanes and mp[_M_MODE] == 1.0 and cf[_P_FRONT_CF] != 0.0
     for k0 in range(0, n, nbk):
         r = min(nbk, n - k0)
         for p0 in range(k0, k0 + r, PASS_ROWS):
@@ -745,7 +731,7 @@ def monitor_run_packed(X: np.ndarray, Y: np.ndarray, EX: np.ndarray, F: np.ndarr
     n = X.shape[0]
     if n == 0:
         _run_flat(0, _EMPTY, 0, 0, 0, _EMPTY, 0, 0, 0, np.zeros((1, N_EX)), F, I,
-                  np.zeros((1, Y.shape[1])))
+                  np.zeros((1, Y.shape[1])), True)
         return
     fx = _flat(X)
     if fx is None:
@@ -757,7 +743,7 @@ def monitor_run_packed(X: np.ndarray, Y: np.ndarray, EX: np.ndarray, F: np.ndarr
     EXw = EX if (EX.dtype == np.float64 and EX.flags.c_contiguous and EX.flags.writeable) \
         else np.empty(EX.shape)
     blk = _EMPTY2 if fy[2] == 1 else np.empty((min(n, OUT_BLOCK), Y.shape[1]))
-    _run_flat(n, fx[0], 0, fx[1], fx[2], fy[0], 0, fy[1], fy[2], EXw, F, I, blk)
+    _run_flat(n, fx[0], 0, fx[1], fx[2], fy[0], 0, fy[1], fy[2], EXw, F, I, blk, True)
     if Yw is not Y:
         Y[...] = Yw
     if EXw is not EX:
@@ -1094,7 +1080,8 @@ def dict_to_row(out: dict[str, Any], columns: tuple[str, ...]) -> np.ndarray:
 
 
 def warm_monitor() -> None:
-    """Compile or load :func:`monitor_step` and :func:`monitor_run` (both layouts)."""
+    """Compile or load :func:`monitor_step_packed` and :func:`monitor_run_packed` (both
+    layouts)."""
     from grfguard.detect.config import MonitorConfig
     from grfguard.estimate.vfs import VirtualForceSensor
     from grfguard.guard import InputGuard

@@ -10,7 +10,12 @@ Mirrors, on flat arrays and in the same operation order, what
 * after the virtual sensor (:func:`sys_twin`): the twin virtual sensor without the
   accelerometer (settings :func:`~grfguard.detect.system.quiet_vfs_config`) runs beside
   the main one; once :class:`~grfguard.detect.system.AccVibrationDetector` latches, its
-  outputs replace the main ones and the corner threshold is widened;
+  outputs replace the main ones;
+* between the sample's sensor side and its detector side (:func:`sys_keep`,
+  :func:`sys_resume`; the batch loop runs the sensor side of several samples first): the
+  layer's values the detector side reads are kept with the sample; once the vibration
+  switch is on, the corner threshold is widened (and the fits settle again when it
+  switches);
 * before the detector (:func:`sys_pre_detect`): the load-cell zeros
   (:class:`~grfguard.detect.system.SwingZeroLearner`) are removed from the readings, a
   fooled swing foot's load moved to the stance foot
