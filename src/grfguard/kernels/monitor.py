@@ -410,8 +410,6 @@ class MonitorKernel:
         if vfs_kernel is None:
             self._vargs = (np.zeros(N_GS), np.zeros(1), np.zeros(1, np.int64), np.zeros(1),
                            np.zeros(1, np.int64))
-        self.xc = np.zeros(n_in)
-        self.vy = np.zeros(_NV)
         self.ws = np.zeros(N_WS)
         self.ex = np.zeros(N_EX)
         self.xbuf = np.zeros(n_in)
@@ -453,8 +451,7 @@ class MonitorKernel:
     # Every array of the step lives in two buffers (floats F, ints I) so that a call from
     # Python converts four arguments, not eighteen (about 2 us less per sample).
     _F_PARTS = ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "vstate", "cf", "vws",
-                "xc", "vy", "ws", "sysp", "syss", "qstate", "qcf", "qws", "qy", "xrow", "yrow",
-                "passrows")
+                "ws", "sysp", "syss", "qstate", "qcf", "qws", "qy", "xrow", "yrow", "passrows")
 
     def _parts(self) -> tuple[list[np.ndarray], list[np.ndarray]]:
         vstate, cf, ci, vws, viws = self.vfs_args()
@@ -488,8 +485,8 @@ class MonitorKernel:
         views["lims"] = views["lims"].reshape(2, len(self.in_cols))
         views["ss"] = views["ss"].reshape(self.ss.shape)
         views["passrows"] = views["passrows"].reshape(PASS_ROWS, -1)
-        for n in ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "xc", "vy", "ws", "sysp",
-                  "syss", "qstate", "qcf", "qws", "qy", "xrow", "yrow", "passrows"):
+        for n in ("ex", "mp", "lims", "ss", "gs", "prm", "sd", "sp", "ws", "sysp", "syss",
+                  "qstate", "qcf", "qws", "qy", "xrow", "yrow", "passrows"):
             setattr(self, n, views[n])
         k = 2 * len(self._F_PARTS) + 1
         ci = self.I[h[k]:h[k] + h[k + 1]]
@@ -553,32 +550,31 @@ class MonitorKernel:
 
 _NF = len(MonitorKernel._F_PARTS)
 _HI = 2 * _NF  # header: (offset, size) per float part, n_in, (offset, size) per int part
-_I_PASS = 2 * MonitorKernel._F_PARTS.index("passrows")  # the batch loop's records
+# each float part's place in the header
+(_I_EX, _I_MP, _I_LIMS, _I_SS, _I_GS, _I_PRM, _I_SD, _I_SP, _I_VSTATE, _I_CF, _I_VWS, _I_WS,
+ _I_SYSP, _I_SYSS, _I_QSTATE, _I_QCF, _I_QWS, _I_QY, _I_XROW, _I_YROW, _I_PASS) = (
+    2 * j for j in range(_NF))
+
+
+@njit_nort(inline="always")
+def _part(F, I, h):
+    """The float part whose (offset, size) is at ``I[h]``."""
+    return F[I[h]:I[h] + I[h + 1]]
 
 
 @njit_nort
 def _unpack(F, I):
     n_in = I[_HI]
-    ex = F[I[0]:I[0] + I[1]]
-    mp = F[I[2]:I[2] + I[3]]
-    lims = F[I[4]:I[4] + I[5]].reshape((2, n_in))
-    ss = F[I[6]:I[6] + I[7]].reshape((8, I[7] // 8))
-    gs = F[I[8]:I[8] + I[9]]
-    prm = F[I[10]:I[10] + I[11]]
-    sd = F[I[12]:I[12] + I[13]]
-    sp = F[I[14]:I[14] + I[15]]
-    vstate = F[I[16]:I[16] + I[17]]
-    cf = F[I[18]:I[18] + I[19]]
-    vws = F[I[20]:I[20] + I[21]]
-    xc = F[I[22]:I[22] + I[23]]
-    vy = F[I[24]:I[24] + I[25]]
-    ws = F[I[26]:I[26] + I[27]]
-    sy = (F[I[28]:I[28] + I[29]], F[I[30]:I[30] + I[31]], F[I[32]:I[32] + I[33]],
-          F[I[34]:I[34] + I[35]], I[I[_HI + 5]:I[_HI + 5] + I[_HI + 6]], F[I[36]:I[36] + I[37]],
-          I[I[_HI + 7]:I[_HI + 7] + I[_HI + 8]], F[I[38]:I[38] + I[39]])
+    ss = _part(F, I, _I_SS)
+    sy = (_part(F, I, _I_SYSP), _part(F, I, _I_SYSS), _part(F, I, _I_QSTATE),
+          _part(F, I, _I_QCF), I[I[_HI + 5]:I[_HI + 5] + I[_HI + 6]], _part(F, I, _I_QWS),
+          I[I[_HI + 7]:I[_HI + 7] + I[_HI + 8]], _part(F, I, _I_QY))
     ci = I[I[_HI + 1]:I[_HI + 1] + I[_HI + 2]]
     viws = I[I[_HI + 3]:I[_HI + 3] + I[_HI + 4]]
-    return ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy
+    return (_part(F, I, _I_EX), _part(F, I, _I_MP), _part(F, I, _I_LIMS).reshape((2, n_in)),
+            ss.reshape((8, ss.shape[0] // 8)), _part(F, I, _I_GS), _part(F, I, _I_PRM),
+            _part(F, I, _I_SD), _part(F, I, _I_SP), _part(F, I, _I_VSTATE),
+            _part(F, I, _I_CF), ci, _part(F, I, _I_VWS), viws, _part(F, I, _I_WS), sy)
 
 
 @njit_nort
@@ -593,14 +589,14 @@ def monitor_step_packed(x, y, F, I):
     column (+-inf: not checked); ``ss``/``gs``/``prm``: detector state and parameters;
     ``sd``/``sp``: the standing layer's (:mod:`grfguard.kernels.standing`; ``sp[0] = 0``:
     off); ``vstate``/``cf``/``ci``/``vws``/``viws``: the virtual sensor's
-    (:class:`~grfguard.kernels.vfs.VFSKernel`); ``xc`` (n_in,), ``vy`` (22,), ``ws``
-    (:data:`N_WS`): scratch; the system layer's ``(sysp,
-    syss, qstate, qcf, qci, qws, qiws, qy)`` (:mod:`grfguard.kernels.system`; ``sysp[0] =
-    0``: off).
+    (:class:`~grfguard.kernels.vfs.VFSKernel`); ``ws`` (:data:`N_WS`): the detector side's
+    scratch; the system layer's ``(sysp, syss, qstate, qcf, qci, qws, qiws, qy)``
+    (:mod:`grfguard.kernels.system`; ``sysp[0] = 0``: off); ``passrows``: the samples'
+    records (:func:`_sense` to :func:`_judge`).
 
     It is the batch loop (:func:`_run_flat`) over one row, so streaming and batch run
     one compiled copy of the step (the block kinematics off: the row is posed alone)."""
-    ex = F[I[0]:I[0] + I[1]].reshape((1, I[1]))
+    ex = _part(F, I, _I_EX).reshape((1, I[_I_EX + 1]))
     zero = I[0] - I[0]  # run-time values, not literals: the batch loop's own signature
     one = zero + 1
     _run_flat(one, x, zero, x.shape[0], one, y, zero, y.shape[0], one, ex, F, I, ex,
@@ -616,27 +612,29 @@ def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk, lanes):
     side of each (:func:`_sense`, its row read through the kernel's row buffer), then the
     detector side of each (:func:`_judge`); the same bits as :func:`monitor_step_packed`
     row after row, with each side's code and data hot in the cache for a whole pass
-    (SURALP: about 10 % less CPU time than whole steps). The rows are written in place when the
-    output's rows are contiguous; otherwise a block of ``yblk.shape[0]`` rows is written
+    (SURALP: about 10 % less CPU time than whole steps). The rows are written in place
+    when the output's rows are contiguous; otherwise a block of ``yblk.shape[0]`` rows is written
     into ``yblk`` and then copied out column by column when the columns are the far-apart
     dimension (a column-major ``Y``, as ``Monitor.run``'s: whole cache lines per column
     instead of one value per column and row; about 10 % less CPU time for
     ``Monitor.run``), row by row otherwise. ``lanes``: the virtual sensor poses
     :data:`LANES` rows at a time (:mod:`grfguard.kernels.front`; off: each row alone,
     the same bits)."""
-    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
-    m = I[43]  # output columns (the size of the row buffer ``yrow``)
-    P = F[I[_I_PASS]:I[_I_PASS] + I[_I_PASS + 1]]
+    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, ws, sy = _unpack(F, I)
+    m = I[_I_YROW + 1]  # output columns (the size of the row buffer ``yrow``)
+    P = _part(F, I, _I_PASS)
     direct = ycs == 1  # rows contiguous: written in place
     nbk = max(1, n) if direct else yblk.shape[0]
     front = lanes and mp[_M_MODE] == 1.0 and cf[_P_FRONT_CF] != 0.0
+    xrow = _part(F, I, _I_XROW)
+    w = P.shape[0] // PASS_ROWS  # one record: cleaned row, sensor outputs, N_R
+    n_in = I[_HI]
     for k0 in range(0, n, nbk):
         r = min(nbk, n - k0)
         for p0 in range(k0, k0 + r, PASS_ROWS):
             p1 = min(p0 + PASS_ROWS, k0 + r)
-            _sense_rows(p0, p1, n, Xf, xo, xrs, xcs, EX, F, I, P, front)
-            w = P.shape[0] // PASS_ROWS
-            n_in = I[_HI]
+            _sense_rows(p0, p1, n, Xf, xo, xrs, xcs, EX, xrow, P, front, mp, lims, gs, prm,
+                        vstate, cf, ci, vws, viws, sy)
             for k in range(p0, p1):
                 if direct:
                     b = yo + k * yrs
@@ -653,11 +651,12 @@ def _run_flat(n, Xf, xo, xrs, xcs, Yf, yo, yrs, ycs, EX, F, I, yblk, lanes):
 
 
 @njit_nort(inline="always")
-def _sense_rows(p0, p1, n, Xf, xo, xrs, xcs, EX, F, I, P, front):
-    """The sensor side (:func:`_sense`) of rows ``p0 .. p1 - 1`` into the records ``P``
-    (the front of the virtual sensor's step, its poses, :data:`LANES` rows at a time)."""
-    ex, mp, lims, ss, gs, prm, sd, sp, vstate, cf, ci, vws, viws, xc, vy, ws, sy = _unpack(F, I)
-    xrow = F[I[40]:I[40] + I[41]]
+def _sense_rows(p0, p1, n, Xf, xo, xrs, xcs, EX, xrow, P, front, mp, lims, gs, prm, vstate,
+                cf, ci, vws, viws, sy):
+    """The sensor side (:func:`_sense`) of rows ``p0 .. p1 - 1``, each read through the
+    row buffer ``xrow``, into the records ``P`` (the front of the virtual sensor's step,
+    its poses, :data:`LANES` rows at a time); the kernel's arrays as :func:`_unpack`
+    gives them."""
     n_in = xrow.shape[0]
     w = P.shape[0] // PASS_ROWS
     for k in range(p0, p1):
