@@ -255,3 +255,39 @@ def test_lean_cache_is_used_by_every_kernel_decorator() -> None:
     for fn in (rne.sincos_flat, rne.hinge_wrench_batch, fk.fk_bodies, monitor._run_flat):
         assert isinstance(fn._cache, FunctionCache)
         assert type(fn._cache) is _jit._LEAN_CACHE, fn
+
+
+def test_warm_up_compiles_in_two_processes_only_from_a_cold_cache(monkeypatch) -> None:
+    """``warm_up`` starts its helper process only when the monitor's loop is missing from
+    the cache and two processes are allowed; it waits for it, and warms everything
+    itself afterwards (a failed helper costs only time)."""
+    from grfguard.kernels import monitor, warmup
+
+    assert not warmup._cold()  # the session's warm-up (conftest) filled the cache
+    started: list[int] = []
+
+    class Helper:
+        def wait(self) -> int:
+            started.append(-1)
+            return 1  # a failed helper: warm_up still warms everything
+
+    monkeypatch.setattr(warmup, "_start_rest", lambda: started.append(1) or Helper())
+    warmup.warm_up(jobs=2)
+    assert started == []
+    index = monitor._run_flat._cache._cache_file
+    monkeypatch.setattr(index, "_index_path", str(KERNELS / "no-such-index.nbi"))
+    assert warmup._cold()
+    warmup.warm_up(jobs=1)
+    assert started == []
+    warmup.warm_up(jobs=2)
+    assert started == [1, -1]
+
+
+def test_warm_up_helper_process_imports_this_install() -> None:
+    """The helper runs from wherever this process imported grfguard (here: the warm
+    cache, so it only loads)."""
+    from grfguard.kernels import warmup
+
+    proc = warmup._start_rest()
+    assert proc is not None
+    assert proc.wait(timeout=300) == 0

@@ -700,8 +700,8 @@ def warm_up_cmd(
     ] = None,
 ) -> None:
     """Compile (or load from the on-disk cache) the compiled kernels now, so that no log
-    and no live sample pays for it (run it once after installing; about three minutes
-    from an empty cache, half a minute more with --robot)."""
+    and no live sample pays for it (run it once after installing; 3-5 minutes from an
+    empty cache, half a minute more with --robot)."""
     from grfguard.kernels import warm_described, warm_up
 
     _say(f"monitor kernels ready in {warm_up():.1f} s")

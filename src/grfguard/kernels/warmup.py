@@ -1,15 +1,20 @@
 """Compile (or load from the on-disk cache) every kernel before the first real sample.
 
-The first call in a fresh environment compiles every kernel: about three minutes of CPU
-(numba, one core; BENCHMARKS "Compiled kernels"). After that the machine code is cached
-next to the modules and a new process loads all of it in about 0.3 s (2026-11-27).
+The first call in a fresh environment compiles every kernel: 323 s on one core, 197 s
+with the monitor's loop and the rest compiled in two processes (2026-11-28, BENCHMARKS
+"Issue 11 status (2026-11-28, session 33)"). After that the machine code is cached next
+to the modules and a new process loads all of it in about 0.3 s (2026-11-27).
 :func:`warm_up` does it up front, e.g. before a live monitor starts, so no sample pays
 for it.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,13 +27,36 @@ __all__ = ["warm_described", "warm_up"]
 WARM_DESCRIBED_S = 2.5
 
 
-def warm_up() -> float:
+def warm_up(jobs: int | None = None) -> float:
     """Compile or load every kernel by running each once on a tiny input.
+
+    From an empty cache with ``jobs`` of 2 or more (default: 2 when this process may run
+    on two cores), the monitor's loop, the longest compilation, is compiled here while a
+    child process compiles the virtual sensor's own entry points and the described
+    robots' kernels (:func:`_warm_rest`): the wall time is then about the loop's alone
+    (BENCHMARKS "Issue 11 status (2026-11-28, session 33)"). With a warm cache, or if
+    the child fails, everything loads (or compiles) here, one kernel after the other.
 
     Returns:
         Seconds it took (compilation on the first run, cache loading afterwards).
     """
     t0 = time.perf_counter()
+    child = _start_rest() if _jobs(jobs) > 1 and _cold() else None
+    try:
+        from grfguard.kernels.monitor import warm_monitor
+
+        warm_monitor()
+    finally:
+        if child is not None:
+            child.wait()
+    _warm_rest()
+    return time.perf_counter() - t0
+
+
+def _warm_rest() -> None:
+    """The kernels :func:`warm_up` compiles besides the monitor's loop: the virtual
+    sensor's own entry points (``VFSKernel.run`` / ``step``), the described robots'
+    channels and filters."""
     from grfguard.estimate.vfs import VirtualForceSensor
     from grfguard.kernels.vfs import N_IN, VFSKernel
     from grfguard.model.robot import RobotConfig
@@ -38,14 +66,48 @@ def warm_up() -> float:
     X = np.full((2, N_IN), np.nan)
     k.run(X)
     k.step(X[0])
-    from grfguard.kernels.monitor import warm_monitor
-
-    warm_monitor()
     from grfguard.kernels import channels, savgol  # described robots: channels, filters
 
     channels.warm()
     savgol.warm()
-    return time.perf_counter() - t0
+
+
+def _jobs(jobs: int | None) -> int:
+    """Processes :func:`warm_up` may use: ``jobs``, or 2 when this process may run on two
+    cores or more."""
+    if jobs is not None:
+        return jobs
+    try:
+        return min(2, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return min(2, os.cpu_count() or 1)
+
+
+def _cold() -> bool:
+    """The monitor's loop is not in numba's on-disk cache (a fresh install, or its
+    sources changed: :mod:`grfguard.kernels._jit` drops stale entries at import)."""
+    from grfguard.kernels.monitor import _run_flat
+
+    cache = getattr(_run_flat, "_cache", None)
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    return index is not None and not os.path.exists(index)
+
+
+def _start_rest() -> subprocess.Popen | None:
+    """A child process running :func:`_warm_rest` (its output discarded; None if it
+    cannot start). It imports this package from where this process did."""
+    import grfguard
+
+    root = str(Path(grfguard.__file__).resolve().parents[1])
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-c", "from grfguard.kernels.warmup import _warm_rest; "
+             "_warm_rest()"], env=env, stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
 
 
 def warm_described(robot: Any) -> float:
