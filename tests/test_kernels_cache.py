@@ -267,9 +267,12 @@ def test_warm_up_compiles_in_two_processes_only_from_a_cold_cache(monkeypatch) -
     started: list[int] = []
 
     class Helper:
-        def wait(self) -> int:
+        def wait(self, timeout: float | None = None) -> int:
             started.append(-1)
             return 1  # a failed helper: warm_up still warms everything
+
+        def kill(self) -> None:
+            started.append(-2)
 
     monkeypatch.setattr(warmup, "_start_rest", lambda: started.append(1) or Helper())
     warmup.warm_up(jobs=2)
@@ -281,6 +284,15 @@ def test_warm_up_compiles_in_two_processes_only_from_a_cold_cache(monkeypatch) -
     assert started == []
     warmup.warm_up(jobs=2)
     assert started == [1, -1]
+    started.clear()  # the loop's compilation fails (or is interrupted): the child stops
+
+    def broken() -> None:
+        raise RuntimeError("no compiler")
+
+    monkeypatch.setattr(monitor, "warm_monitor", broken)
+    with pytest.raises(RuntimeError, match="no compiler"):
+        warmup.warm_up(jobs=2)
+    assert started == [1, -2, -1]
 
 
 def test_warm_up_helper_process_imports_this_install() -> None:

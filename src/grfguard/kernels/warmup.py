@@ -25,6 +25,10 @@ __all__ = ["warm_described", "warm_up"]
 #: the described-robot path: its Savitzky-Golay windows are 101 samples, the long blend
 #: 1001).
 WARM_DESCRIBED_S = 2.5
+#: Seconds :func:`warm_up` waits for its child after compiling the monitor's loop (which
+#: takes longer than the child's part) before it stops the child and compiles the rest
+#: itself.
+CHILD_WAIT_S = 600.0
 
 
 def warm_up(jobs: int | None = None) -> float:
@@ -46,8 +50,16 @@ def warm_up(jobs: int | None = None) -> float:
         from grfguard.kernels.monitor import warm_monitor
 
         warm_monitor()
-    finally:
+    except BaseException:  # an error or an interrupt here: the child is not needed
         if child is not None:
+            child.kill()
+            child.wait()
+        raise
+    if child is not None:
+        try:
+            child.wait(timeout=CHILD_WAIT_S)
+        except subprocess.TimeoutExpired:  # a stuck child: compile what it left here
+            child.kill()
             child.wait()
     _warm_rest()
     return time.perf_counter() - t0
