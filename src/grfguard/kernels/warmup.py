@@ -1,9 +1,10 @@
 """Compile (or load from the on-disk cache) every kernel before the first real sample.
 
-The first call in a fresh environment compiles every kernel: 323 s on one core, 197 s
-with the monitor's loop and the rest compiled in two processes (2026-11-28, BENCHMARKS
-"Issue 11 status (2026-11-28, session 33)"). After that the machine code is cached next
-to the modules and a new process loads all of it in about 0.3 s (2026-11-27).
+The first call in a fresh environment compiles every kernel: 278-323 s on one core,
+197-210 s with the monitor's loop and the rest compiled in two processes (2026-11-28,
+BENCHMARKS "Issue 11 status (2026-11-28, session 33)"). After that the machine code is
+cached next to the modules and a new process loads all of it in about 0.3 s
+(2026-11-27).
 :func:`warm_up` does it up front, e.g. before a live monitor starts, so no sample pays
 for it.
 """
