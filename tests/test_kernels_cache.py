@@ -295,11 +295,13 @@ def test_warm_up_compiles_in_two_processes_only_from_a_cold_cache(monkeypatch) -
     assert started == [1, -2, -1]
 
 
-def test_warm_up_helper_process_imports_this_install() -> None:
-    """The helper runs from wherever this process imported grfguard (here: the warm
-    cache, so it only loads)."""
+def test_warm_up_helper_process_imports_this_install(tmp_path: Path, monkeypatch) -> None:
+    """The helper runs from wherever this process imported grfguard, whatever the
+    working directory (here: the warm cache, so it only loads)."""
     from grfguard.kernels import warmup
 
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("PYTHONPATH", raising=False)
     proc = warmup._start_rest()
     assert proc is not None
     assert proc.wait(timeout=300) == 0

@@ -108,17 +108,18 @@ def _cold() -> bool:
 
 def _start_rest() -> subprocess.Popen | None:
     """A child process running :func:`_warm_rest` (its output discarded; None if it
-    cannot start). It imports this package from where this process did."""
+    cannot start). It imports this package from where this process did: that directory
+    goes first on its path only when its own path lacks it, and the working directory
+    is not on it (``-P``)."""
     import grfguard
 
     root = str(Path(grfguard.__file__).resolve().parents[1])
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    code = (f"import sys; r = {root!r}; r in sys.path or sys.path.insert(0, r); "
+            "from grfguard.kernels.warmup import _warm_rest; _warm_rest()")
     try:
-        return subprocess.Popen(
-            [sys.executable, "-c", "from grfguard.kernels.warmup import _warm_rest; "
-             "_warm_rest()"], env=env, stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return subprocess.Popen([sys.executable, "-P", "-c", code],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
     except OSError:
         return None
 
