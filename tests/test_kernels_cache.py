@@ -259,8 +259,8 @@ def test_lean_cache_is_used_by_every_kernel_decorator() -> None:
 
 def test_warm_up_compiles_in_two_processes_only_from_a_cold_cache(monkeypatch) -> None:
     """``warm_up`` starts its helper process only when the monitor's loop is missing from
-    the cache and two processes are allowed; it waits for it, and warms everything
-    itself afterwards (a failed helper costs only time)."""
+    the cache, two processes are allowed and the memory for both is free; it waits for
+    it, and warms everything itself afterwards (a failed helper costs only time)."""
     from grfguard.kernels import monitor, warmup
 
     assert not warmup._cold()  # the session's warm-up (conftest) filled the cache
@@ -282,6 +282,10 @@ def test_warm_up_compiles_in_two_processes_only_from_a_cold_cache(monkeypatch) -
     assert warmup._cold()
     warmup.warm_up(jobs=1)
     assert started == []
+    monkeypatch.setattr(warmup, "_free_memory", lambda: 2e9)  # no room for two
+    warmup.warm_up(jobs=2)
+    assert started == []
+    monkeypatch.setattr(warmup, "_free_memory", lambda: 8e9)
     warmup.warm_up(jobs=2)
     assert started == [1, -1]
     started.clear()  # the loop's compilation fails (or is interrupted): the child stops
@@ -305,3 +309,12 @@ def test_warm_up_helper_process_imports_this_install(tmp_path: Path, monkeypatch
     proc = warmup._start_rest()
     assert proc is not None
     assert proc.wait(timeout=300) == 0
+
+
+def test_free_memory_is_a_positive_number_of_bytes() -> None:
+    from grfguard.kernels import warmup
+
+    free = warmup._free_memory()
+    assert free > 0
+    if Path("/proc/meminfo").exists():  # Linux: read, not assumed
+        assert free < float("inf")

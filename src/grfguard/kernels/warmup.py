@@ -11,6 +11,8 @@ for it.
 
 from __future__ import annotations
 
+import contextlib
+import math
 import os
 import subprocess
 import sys
@@ -30,6 +32,9 @@ WARM_DESCRIBED_S = 2.5
 #: takes longer than the child's part) before it stops the child and compiles the rest
 #: itself.
 CHILD_WAIT_S = 600.0
+#: Bytes of free memory :func:`warm_up` wants before it compiles in two processes: the
+#: monitor's loop peaks at about 2.0 GB, the child at 0.7 GB (2026-11-28).
+TWO_PROCESS_BYTES = 3.5e9
 
 
 def warm_up(jobs: int | None = None) -> float:
@@ -39,14 +44,16 @@ def warm_up(jobs: int | None = None) -> float:
     on two cores), the monitor's loop, the longest compilation, is compiled here while a
     child process compiles the virtual sensor's own entry points and the described
     robots' kernels (:func:`_warm_rest`): the wall time is then about the loop's alone
-    (BENCHMARKS "Issue 11 status (2026-11-28, session 33)"). With a warm cache, or if
-    the child fails, everything loads (or compiles) here, one kernel after the other.
+    (BENCHMARKS "Issue 11 status (2026-11-28, session 33)"), if the machine has the
+    memory for both (:data:`TWO_PROCESS_BYTES`). With a warm cache, or if the child
+    fails, everything loads (or compiles) here, one kernel after the other.
 
     Returns:
         Seconds it took (compilation on the first run, cache loading afterwards).
     """
     t0 = time.perf_counter()
-    child = _start_rest() if _jobs(jobs) > 1 and _cold() else None
+    two = _jobs(jobs) > 1 and _cold() and _free_memory() >= TWO_PROCESS_BYTES
+    child = _start_rest() if two else None
     try:
         from grfguard.kernels.monitor import warm_monitor
 
@@ -94,6 +101,25 @@ def _jobs(jobs: int | None) -> int:
         return min(2, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not on Linux
         return min(2, os.cpu_count() or 1)
+
+
+def _free_memory() -> float:
+    """Bytes this process could still allocate: the system's available memory
+    (``MemAvailable``), less where a cgroup (v2) limit leaves less; infinite where
+    neither can be read."""
+    free = math.inf
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    free = float(line.split()[1]) * 1024.0
+                    break
+    with contextlib.suppress(OSError, ValueError):
+        cg = Path("/sys/fs/cgroup")
+        limit = (cg / "memory.max").read_text().strip()
+        if limit != "max":
+            free = min(free, float(limit) - float((cg / "memory.current").read_text()))
+    return free
 
 
 def _cold() -> bool:
