@@ -37,7 +37,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-__all__ = ["batch_process", "keep_freed_memory", "small_pages"]
+__all__ = ["available_memory", "batch_process", "keep_freed_memory", "small_pages"]
 
 #: ``mallopt`` parameters (glibc's malloc.h) and the values set.
 _M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3
@@ -132,3 +132,15 @@ def small_pages() -> Iterator[None]:
         yield
     finally:
         setter(before)
+
+
+def available_memory() -> int | None:
+    """``MemAvailable`` from ``/proc/meminfo`` [bytes], or None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None

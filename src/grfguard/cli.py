@@ -144,25 +144,14 @@ def _reality_with_controller(gap: Any, controller: str | None) -> Any:
 _SIM_BYTES_PER_S = 5_000_000
 
 
-def _available_memory() -> int | None:
-    """MemAvailable from /proc/meminfo [bytes], or None where unknown."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
 def _check_memory_for(duration: float) -> None:
     """Refuse a ``--duration`` whose simulation cannot fit in the available memory."""
+    from grfguard._memory import available_memory
     from grfguard.errors import ConfigError
 
     if not isinstance(duration, (int, float)) or not duration > 0 or duration != duration:
         raise ConfigError(f"--duration = {duration!r} s must be a positive number of seconds")
-    avail = _available_memory()
+    avail = available_memory()
     need = duration * _SIM_BYTES_PER_S
     if avail is not None and need > 0.8 * avail:
         max_s = 0.8 * avail / _SIM_BYTES_PER_S

@@ -105,15 +105,12 @@ def _jobs(jobs: int | None) -> int:
 
 def _free_memory() -> float:
     """Bytes this process could still allocate: the system's available memory
-    (``MemAvailable``), less where a cgroup (v2) limit leaves less; infinite where
-    neither can be read."""
-    free = math.inf
-    with contextlib.suppress(OSError, ValueError, IndexError):
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    free = float(line.split()[1]) * 1024.0
-                    break
+    (:func:`grfguard._memory.available_memory`), less where a cgroup (v2) limit leaves
+    less; infinite where neither can be read."""
+    from grfguard._memory import available_memory
+
+    avail = available_memory()
+    free = math.inf if avail is None else float(avail)
     with contextlib.suppress(OSError, ValueError):
         cg = Path("/sys/fs/cgroup")
         limit = (cg / "memory.max").read_text().strip()
