@@ -9,6 +9,7 @@ must be identical, the floats equal to 1e-9 N.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import pickle
 
@@ -18,7 +19,7 @@ import pytest
 
 from grfguard.detect import Monitor, MonitorConfig
 from grfguard.detect.detector import Detector, DetectorInputs
-from grfguard.estimate.vfs import with_vfs_columns
+from grfguard.estimate.vfs import VirtualForceSensor, with_vfs_columns
 from grfguard.faults import inject_faults
 from grfguard.kernels.detect import KIND_NAMES, DetectKernel, detect_params
 from grfguard.model.robot import SENSOR_NAMES, SURALP
@@ -208,6 +209,39 @@ def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: 
                 assert (y[j] == float(o[c]) == want) or (math.isnan(y[j]) and math.isnan(
                     want) and math.isnan(float(o[c]))), (k, c)
         assert o["system_reason"] == b["system_reason"], k
+
+
+def test_update_array_follows_a_replaced_virtual_sensor(walk: pd.DataFrame) -> None:
+    """``update_array`` keeps its compiled step after the first call (the 1 kHz path);
+    a virtual sensor replaced on the monitor drops it: the rows then go through the new
+    sensor's step, as the dict call's do."""
+    raw = walk.drop(columns=[c for c in walk.columns if c.startswith(
+        ("vfs_", "com_est_", "contact_est_", "zmp_est"))]).iloc[:200]
+    mon = Monitor.for_log(raw)
+    ref = Monitor.for_log(raw)
+    assert mon.vfs is not None
+    X = np.column_stack([raw[c].to_numpy(float) if c in raw else np.full(len(raw), np.nan)
+                         for c in mon.input_columns])
+    rows = raw.to_dict("records")
+    cols = mon.output_columns
+    j = cols.index("vfs_r1")
+    old = np.array([mon.update_array(np.ascontiguousarray(x)) for x in X])
+    slower = dataclasses.replace(mon.vfs.config, filter_cutoff=4.0)
+    for m in (mon, ref):
+        m.vfs = VirtualForceSensor(m.vfs.robot, slower)
+        m.reset()
+    y = np.empty(len(cols))
+    new = np.empty((200, 8))
+    for k in range(200):
+        got = mon.update_array(np.ascontiguousarray(X[k]), y)
+        assert got is y
+        want = ref.update(rows[k])
+        for i, c in enumerate(cols[j:j + 8]):
+            assert got[j + i] == float(want[c]) or (math.isnan(got[j + i]) and math.isnan(
+                float(want[c]))), (k, c)
+        new[k] = got[j:j + 8]
+    # the new sensor's forces on the same rows, not the old one's
+    assert np.nanmax(np.abs(new - old[:, j:j + 8])) > 1.0
 
 
 def test_uncompiled_features_fall_back(walk: pd.DataFrame) -> None:

@@ -77,6 +77,8 @@ __all__ = ["Monitor"]
 _NAN = float("nan")
 _UNSET = object()
 _F8 = np.dtype(np.float64)
+_ND = np.ndarray
+_ROW_STRIDES = (8,)  # a contiguous float64 row
 _REC_COLS = tuple(f"recovered_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
@@ -245,6 +247,7 @@ class Monitor:
         self.compiled = self.config.compiled if compiled is None else bool(compiled)
         self._kernels: dict[tuple[bool, bool], Any] = {}
         self._kernels_for: Any = _UNSET
+        self._row_kernel: Any = None  # update_array's kernel, once it has been built
         self.guard = guard if guard is not None else GuardConfig()
         if robot is None:
             robot = getattr(vfs, "robot", None)
@@ -347,6 +350,7 @@ class Monitor:
         if self._kernels_for is not self.vfs:
             self._kernels = {}
             self._kernels_for = self.vfs
+            self._row_kernel = None
             self._compiled_ok = not self.compiled_reason()
         if not self._compiled_ok:
             return None
@@ -373,6 +377,8 @@ class Monitor:
                 self._compiled_ok = False
                 return None
             self._kernels[key] = k
+            if key == (True, True):
+                self._row_kernel = k
         return k
 
     def reset(self) -> None:
@@ -681,6 +687,18 @@ class Monitor:
         Raises:
             LogFormatError: If ``x`` or ``y`` has the wrong length.
         """
+        k = self._row_kernel
+        if (k is not None and self._kernels_for is self.vfs and x.__class__ is _ND
+                and x.dtype is _F8 and x.shape == k.sin and x.strides == _ROW_STRIDES):
+            # the 1 kHz path: straight to the compiled entry point once it is known
+            # (about 0.6 us of Python less than below; the same exact shapes and types)
+            if y is None:
+                y = np.empty(k.sout)
+            ep = k._entry
+            if (ep is not None and y.__class__ is _ND and y.dtype is _F8
+                    and y.shape == k.sout and y.strides == _ROW_STRIDES):
+                ep(x, y, k.F, k.I)
+                return y
         k = self._kernel()
         if k is not None:
             if y is None:
