@@ -244,6 +244,39 @@ def test_update_array_follows_a_replaced_virtual_sensor(walk: pd.DataFrame) -> N
     assert np.nanmax(np.abs(new - old[:, j:j + 8])) > 1.0
 
 
+def test_compiled_dict_call_equals_python_on_odd_values(walk: pd.DataFrame) -> None:
+    """The compiled dict call takes what the pure-Python stages take, row by row: None,
+    numeric text, other text, booleans, lists and missing keys give the same outputs,
+    ``system_reason`` included (the same keys in the same order)."""
+    raw = walk.drop(columns=[c for c in walk.columns if c.startswith(
+        ("vfs_", "com_est_", "contact_est_", "zmp_est"))]).iloc[:300]
+    mon = Monitor.for_log(raw)
+    ref = Monitor.for_log(raw, compiled=False)
+    assert mon.compiled_reason() == "" and ref.compiled_reason() != ""
+    rows = raw.to_dict("records")
+    odd = {40: ("force_r2", None), 60: ("imu_gyro_x", None), 80: ("force_l1", "12.5"),
+           100: ("q_r_knee", "bent"), 120: ("contact_ref_r", True), 140: ("imu_acc_y", [1.0]),
+           160: ("force_r4", float("inf")), 180: ("time", None), 200: ("imu_quat_w", "1")}
+    for k, (c, v) in odd.items():
+        assert c in rows[k]
+        rows[k][c] = v
+    for k in (220, 240):
+        del rows[k]["force_l3"]
+        del rows[k]["imu_gyro_z"]
+    reasons = 0
+    for k, r in enumerate(rows):
+        o, w = mon.update(r), ref.update(r)
+        assert list(o) == list(w), k
+        for c, want in w.items():
+            got = o[c]
+            if isinstance(want, float):
+                assert abs(got - want) <= 1e-9 or (math.isnan(got) and math.isnan(want)), (k, c)
+            else:
+                assert got == want, (k, c)
+        reasons += w["system_reason"] != ""
+    assert reasons >= len(odd)  # the odd rows were reported
+
+
 def test_uncompiled_features_fall_back(walk: pd.DataFrame) -> None:
     """The paper method and diagnostics run the Python stages (the common-mode layer is
     compiled: tests/test_kernels_system.py); ``update_array`` still works through them."""

@@ -39,6 +39,7 @@ Row layouts (:func:`input_columns`, :func:`output_columns`):
 from __future__ import annotations
 
 import math
+import operator
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -774,12 +775,20 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
     order) as the pure-Python stages."""
     x = k.xbuf
     odd = False
-    vals = [row.get(c, math.nan) for c in k.in_cols]
+    try:  # every input column in the row (the usual case): one lookup in C
+        vals = _row_getter(k.in_cols)(row)
+    except (KeyError, TypeError):
+        vals = [row.get(c, math.nan) for c in k.in_cols]
     try:
         x[:] = vals  # one conversion in C (numbers, numeric text, booleans)
-        for j in np.flatnonzero(np.isnan(x)):  # None -> NaN here, an error for float()
-            if vals[j] is None:
-                odd = True
+        try:  # None -> NaN in that conversion, an error for float(): look for it only
+            plain = not math.isnan(sum(vals))  # when a value is NaN, None or text
+        except TypeError:
+            plain = False
+        if not plain:
+            for j in np.flatnonzero(np.isnan(x)):
+                if vals[j] is None:
+                    odd = True
     except (TypeError, ValueError, OverflowError):
         for j, v in enumerate(vals):
             try:
@@ -794,12 +803,13 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
     if k.with_vfs:
         out = dict(zip(OUT_COLUMNS, y[:_NV], strict=True))
         o = _NV
-    for i in range(8):
-        out[_FLAG_COLS[i]] = y[o + i] != 0.0
-        out[_KIND_COLS[i]] = KIND_NAMES[int(y[o + 8 + i])]
-    for i in range(8):
-        out[_REC_COLS[i]] = y[o + 24 + i]
-        out[_ETA_COLS[i]] = y[o + 16 + i]
+    pair = [None] * 16  # flag_<s>, kind_<s> by sensor; then recovered_<s>, eta_<s>
+    pair[0::2] = map(operator.ne, y[o:o + 8], _ZEROS8)
+    pair[1::2] = map(KIND_NAMES.__getitem__, map(int, y[o + 8:o + 16]))
+    out.update(zip(_FLAG_KIND_COLS, pair, strict=True))
+    pair[0::2] = y[o + 24:o + 32]
+    pair[1::2] = y[o + 16:o + 24]
+    out.update(zip(_REC_ETA_COLS, pair, strict=True))
     if k.with_system:
         out["model_mismatch"] = y[o + 33] != 0.0
         out["model_mismatch_reason"] = reason_text(y[o + 33:], k.vib_config)
@@ -811,6 +821,20 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
     out["system_reason"] = (reason if state == "ok" else
                             _reason(state, x[0], float(ex[1]), ex[2] != 0.0, reason))
     return out
+
+
+_ZEROS8 = (0.0,) * 8
+_FLAG_KIND_COLS = tuple(c for i in range(8) for c in (_FLAG_COLS[i], _KIND_COLS[i]))
+_REC_ETA_COLS = tuple(c for i in range(8) for c in (_REC_COLS[i], _ETA_COLS[i]))
+_GETTERS: dict[tuple[str, ...], Any] = {}
+
+
+def _row_getter(cols: tuple[str, ...]) -> Any:
+    """``operator.itemgetter`` of ``cols`` (kept per column tuple)."""
+    g = _GETTERS.get(cols)
+    if g is None:
+        g = _GETTERS[cols] = operator.itemgetter(*cols)
+    return g
 
 
 def _column(log: pd.DataFrame, c: str) -> np.ndarray:
