@@ -242,6 +242,11 @@ def test_update_array_follows_a_replaced_virtual_sensor(walk: pd.DataFrame) -> N
         new[k] = got[j:j + 8]
     # the new sensor's forces on the same rows, not the old one's
     assert np.nanmax(np.abs(new - old[:, j:j + 8])) > 1.0
+    # a monitor pickled before the direct path existed (no such attribute) still streams
+    was = pickle.loads(pickle.dumps(Monitor.for_log(raw)))
+    del was.__dict__["_row_kernel"]
+    again = np.array([was.update_array(np.ascontiguousarray(x)) for x in X])
+    np.testing.assert_array_equal(again[:, j:j + 8], old[:, j:j + 8])
 
 
 def test_compiled_dict_call_equals_python_on_odd_values(walk: pd.DataFrame) -> None:

@@ -230,6 +230,10 @@ class Monitor:
         >>> mon.reset(); row_out = mon.update(log.iloc[0].to_dict())
     """
 
+    #: update_array's compiled kernel once built (a class default: monitors pickled by an
+    #: earlier version, which lack the attribute, take the checked path)
+    _row_kernel: Any = None
+
     def __init__(
         self,
         config: MonitorConfig | None = None,
