@@ -194,3 +194,9 @@ def test_array_call_rejects_wrong_shapes_and_survives_garbage(walk):
     assert np.isnan(y[:-1]).all() and y[-1] == 0.0
     y = vfs.update(dict.fromkeys(["q_r_hip_yaw", "imu_quat_w"], "junk"))
     assert y["vfs_valid"] == 0.0
+    # an integer too large for a float is a bad value too, not a crash of the live sensor
+    row = walk.iloc[0].to_dict()
+    row["q_r_knee"] = 10**400
+    assert vfs.update(row)["vfs_valid"] == 0.0
+    row["q_r_knee"] = float(walk["q_r_knee"].iloc[0])
+    assert vfs.update(row)["vfs_valid"] == 1.0

@@ -234,7 +234,7 @@ class VirtualForceSensor:
         for i, c in enumerate(self._in_cols):
             try:
                 x[i] = float(row[c])
-            except (KeyError, TypeError, ValueError):
+            except (KeyError, TypeError, ValueError, OverflowError):
                 x[i] = np.nan
         y = self.kernel().step(x, self._y)
         return dict(zip(VFS_OUTPUT_COLUMNS, y.tolist(), strict=True))
