@@ -54,8 +54,7 @@ JUDGE_MARKS = [
     ("    o = 0\n", "output row"),
     ("    yout[o + 32] = state", "system layer: outputs"),
 ]
-_HEADER = ("from {mod} import *  # noqa\n"
-           "import {mod} as _M\n"
+_HEADER = ("import {mod} as _M\n"
            "globals().update({{k: v for k, v in vars(_M).items() if not k.startswith('__')}})\n"
            "from grfguard.kernels._jit import njit_nort\n\n")
 

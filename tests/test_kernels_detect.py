@@ -244,7 +244,7 @@ def test_update_array_follows_a_replaced_virtual_sensor(walk: pd.DataFrame) -> N
     assert np.nanmax(np.abs(new - old[:, j:j + 8])) > 1.0
     # a monitor pickled before the direct path existed (no such attribute) still streams
     was = pickle.loads(pickle.dumps(Monitor.for_log(raw)))
-    del was.__dict__["_row_kernel"]
+    was.__dict__.pop("_row_kernel", None)
     again = np.array([was.update_array(np.ascontiguousarray(x)) for x in X])
     np.testing.assert_array_equal(again[:, j:j + 8], old[:, j:j + 8])
 

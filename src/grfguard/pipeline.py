@@ -251,7 +251,6 @@ class Monitor:
         self.compiled = self.config.compiled if compiled is None else bool(compiled)
         self._kernels: dict[tuple[bool, bool], Any] = {}
         self._kernels_for: Any = _UNSET
-        self._row_kernel: Any = None  # update_array's kernel, once it has been built
         self.guard = guard if guard is not None else GuardConfig()
         if robot is None:
             robot = getattr(vfs, "robot", None)
@@ -691,26 +690,20 @@ class Monitor:
         Raises:
             LogFormatError: If ``x`` or ``y`` has the wrong length.
         """
-        k = self._row_kernel
-        if (k is not None and self._kernels_for is self.vfs and x.__class__ is _ND
-                and x.dtype is _F8 and x.shape == k.sin and x.strides == _ROW_STRIDES):
-            # the 1 kHz path: straight to the compiled entry point once it is known
-            # (about 0.6 us of Python less than below; the same exact shapes and types)
-            if y is None:
-                y = np.empty(k.sout)
-            ep = k._entry
-            if (ep is not None and y.__class__ is _ND and y.dtype is _F8
-                    and y.shape == k.sout and y.strides == _ROW_STRIDES):
-                ep(x, y, k.F, k.I)
-                return y
-        k = self._kernel()
+        k = self._row_kernel if self._kernels_for is self.vfs else None
+        if k is None:
+            k = self._kernel()
         if k is not None:
             if y is None:
                 y = np.empty(k.sout)
             # the compiled code does not check bounds: exact shapes and types only
-            if (x.__class__ is np.ndarray and y.__class__ is np.ndarray
-                    and x.shape == k.sin and y.shape == k.sout and x.dtype is _F8
-                    and y.dtype is _F8 and x.flags.c_contiguous and y.flags.c_contiguous):
+            if (x.__class__ is _ND and y.__class__ is _ND and x.dtype is _F8
+                    and y.dtype is _F8 and x.shape == k.sin and y.shape == k.sout
+                    and x.strides == _ROW_STRIDES and y.strides == _ROW_STRIDES):
+                ep = k._entry  # the 1 kHz path: straight to the machine code once known
+                if ep is not None:
+                    ep(x, y, k.F, k.I)
+                    return y
                 return k.step(x, y)
         n_in = len(self.input_columns)
         n_out = len(self.output_columns)

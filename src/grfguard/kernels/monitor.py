@@ -385,6 +385,7 @@ class MonitorKernel:
         # system layer (kernels/system.py): (monitor, has_gyro, twin VFS kernel or None)
         self.with_system = system is not None
         self.in_cols = input_columns(self.with_vfs, self.with_system)
+        self.row_get = operator.itemgetter(*self.in_cols)  # a row's inputs (update_dict)
         self.out_cols = output_columns(self.with_vfs, self.with_system)
         self._system_arrays(system, vfs_kernel)
         self.prm = np.ascontiguousarray(prm, dtype=float)
@@ -511,6 +512,7 @@ class MonitorKernel:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
+        self.row_get = operator.itemgetter(*self.in_cols)  # (also for older pickles)
         self._relink()  # a pickled view is a copy: share the buffers again
 
     def reset(self) -> None:
@@ -776,7 +778,7 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
     x = k.xbuf
     odd = False
     try:  # every input column in the row (the usual case): one lookup in C
-        vals = _row_getter(k.in_cols)(row)
+        vals = k.row_get(row)
     except (KeyError, TypeError):
         vals = [row.get(c, math.nan) for c in k.in_cols]
     try:
@@ -826,15 +828,6 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
 _ZEROS8 = (0.0,) * 8
 _FLAG_KIND_COLS = tuple(c for i in range(8) for c in (_FLAG_COLS[i], _KIND_COLS[i]))
 _REC_ETA_COLS = tuple(c for i in range(8) for c in (_REC_COLS[i], _ETA_COLS[i]))
-_GETTERS: dict[tuple[str, ...], Any] = {}
-
-
-def _row_getter(cols: tuple[str, ...]) -> Any:
-    """``operator.itemgetter`` of ``cols`` (kept per column tuple)."""
-    g = _GETTERS.get(cols)
-    if g is None:
-        g = _GETTERS[cols] = operator.itemgetter(*cols)
-    return g
 
 
 def _column(log: pd.DataFrame, c: str) -> np.ndarray:
