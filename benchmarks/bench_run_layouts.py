@@ -8,7 +8,7 @@ printed too):
 
 * the compiled loop over the whole log already in one row-major array, output row-major
   (``monitor_run_packed``: no chunk, the lower bound of the loop);
-* :func:`grfguard.kernels.monitor.run_rows` over the whole log (input columns copied
+* :func:`grfguard.compiled_monitor.run_rows` over the whole log (input columns copied
   chunk by chunk into a column-major buffer of 4,096 rows), with the input buffer's rows
   padded to an odd number of cache lines (``chunk_buffers``) or not (4,096 floats: every
   column's value of a sample 32 kB from the next, one L1 set), into a column-major
@@ -32,10 +32,10 @@ import time
 
 import numpy as np
 
+from grfguard import compiled_monitor as km
 from grfguard.detect import Monitor
 from grfguard.faults import inject_faults
 from grfguard.io.codes import codes_to_str
-from grfguard.kernels import monitor as km
 from grfguard.kernels.detect import KIND_NAMES
 from grfguard.model.robot import SURALP
 from grfguard.sim import GaitConfig, NoiseConfig, simulate

@@ -2,7 +2,7 @@
 
 SURALP, the paper scenario on the 60 s walk (seed 0), default monitor (common-mode layer
 on, VFS inside). Each round runs ``Monitor.run`` once and then a copy of
-``kernels.monitor.run_frame`` with a timer between its parts (the kernel set-up, the
+``compiled_monitor.run_frame`` with a timer between its parts (the kernel set-up, the
 input columns, the buffers, the compiled loop into its reused output block, the blocks
 split into the returned columns, the text columns, the frame assembly, ``attrs``), so
 both see the same load; prints the minimum and median of each part in µs/sample of
@@ -24,10 +24,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=9)
     a = ap.parse_args()
+    from grfguard import compiled_monitor as M
     from grfguard.detect import Monitor
     from grfguard.faults import inject_faults
-    from grfguard.kernels import monitor as M
     from grfguard.model.robot import SURALP
+    from grfguard.pipeline import _with_columns
     from grfguard.sim import GaitConfig, NoiseConfig, simulate
 
     walk = simulate(SURALP, GaitConfig(duration=60.0), NoiseConfig(), seed=0)
@@ -72,7 +73,7 @@ def main() -> None:
         t = time.process_time()
         new = cols.columns(mon, log, src[0], EX)
         t = tick("output columns (kinds, texts)", t)
-        out = M._with_columns(log, new)
+        out = _with_columns(log, new, copy=False)
         t = tick("frame assembly", t)
         out.attrs = {**raw.attrs, "monitor": mon.describe()}
         tick("attrs", t)

@@ -118,6 +118,7 @@ def _log():
 def _callers(part: str, log):
     """``(call(loop), real loop)``: a call of a loop (the real one or a variant's) over
     the whole log from a fresh state."""
+    from grfguard.compiled_monitor import _column
     from grfguard.detect import Monitor
     from grfguard.kernels import monitor as M
     from grfguard.kernels import vfs as V
@@ -136,7 +137,7 @@ def _callers(part: str, log):
     mon.run(log)
     mk = mon._batch_kernel(log)
     X = np.ascontiguousarray(np.column_stack([
-        M._column(log, c) if c in log.columns else np.full(len(log), np.nan)
+        _column(log, c) if c in log.columns else np.full(len(log), np.nan)
         for c in mk.in_cols]))
     n = len(log)
     Y = np.empty((n, len(mk.out_cols)))

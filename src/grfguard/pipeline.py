@@ -123,10 +123,12 @@ def _log_robot(log: pd.DataFrame, vfs: Any, robot: Any) -> RobotConfig:
     return log_robot(log, robot, where="Monitor.for_log")
 
 
-def _with_columns(log: pd.DataFrame, new: Mapping[str, Any]) -> pd.DataFrame:
+def _with_columns(log: pd.DataFrame, new: Mapping[str, Any], copy: bool = True
+                  ) -> pd.DataFrame:
     """A copy of ``log`` with the columns ``new`` (replaced in place when ``log`` has
-    them, else appended in order), built in one go."""
-    add = pd.DataFrame(dict(new), index=log.index)
+    them, else appended in order), built in one go; ``copy=False`` takes the arrays of
+    ``new`` as they are (fresh arrays that nothing else holds)."""
+    add = pd.DataFrame(dict(new), index=log.index, copy=copy)
     if not any(c in log.columns for c in new):
         return pd.concat([log, add], axis=1)
     order = list(log.columns) + [c for c in new if c not in log.columns]
@@ -617,7 +619,7 @@ class Monitor:
             row = {}
         k = self._kernel()
         if k is not None:
-            from grfguard.kernels.monitor import update_dict
+            from grfguard.compiled_monitor import update_dict
 
             return update_dict(self, k, row)
         t_raw = _f(row, TIME)
@@ -720,7 +722,7 @@ class Monitor:
             k.step(x, yy)
             y[:] = yy
             return y
-        from grfguard.kernels.monitor import dict_to_row
+        from grfguard.compiled_monitor import dict_to_row
 
         y[:] = dict_to_row(self.update(dict(zip(self.input_columns, x.tolist(),
                                                 strict=True))), self.output_columns)
@@ -820,7 +822,7 @@ class Monitor:
         """
         k = self._batch_kernel(log)
         if k is not None:
-            from grfguard.kernels.monitor import run_frame
+            from grfguard.compiled_monitor import run_frame
 
             out = run_frame(self, k, log)
             out.attrs = {**log.attrs, "monitor": self.describe()}

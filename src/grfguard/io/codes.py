@@ -10,7 +10,7 @@ takes milliseconds instead of the 600 000 string objects and pandas' type infere
 categories, in code order) for callers that want the codes kept.
 
 This is the one place where codes become names: the monitor's batch output
-(:mod:`grfguard.kernels.monitor`) and any other writer of ``kind_<s>`` /
+(:mod:`grfguard.compiled_monitor`) and any other writer of ``kind_<s>`` /
 ``system_state`` columns go through it.
 """
 

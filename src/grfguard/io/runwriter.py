@@ -86,7 +86,7 @@ def write_run(mon: Any, log: Any, path: str | Path, rows: int = BLOCK_ROWS,
     k = mon._batch_kernel(log)
     if k is None:
         return None
-    from grfguard.kernels import monitor as km
+    from grfguard import compiled_monitor as km
 
     # load the loop now (a call over no rows): the blocks then time only the rows
     km.monitor_run_packed(np.empty((0, len(k.in_cols))), np.empty((0, len(k.out_cols))),
@@ -383,7 +383,7 @@ class _Blocks:
 
     def __init__(self, mon: Any, k: Any, log: Any, rows: int, raw: set | None = None,
                  columns: list[str] | None = None) -> None:
-        from grfguard.kernels import monitor as km
+        from grfguard import compiled_monitor as km
 
         log = log.copy(deep=False)
         log.attrs = {}  # column access would deep-copy the metadata every time
