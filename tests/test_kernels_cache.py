@@ -120,6 +120,19 @@ def test_constants_frozen_from_outside_modules_reach_their_kernels() -> None:
     assert not moved & {"fk", "rne", "nnls", "standing", "detect"}
 
 
+def test_the_monitor_s_python_side_is_no_part_of_a_kernel_hash() -> None:
+    """The compiled monitor's dict call and batch frame (``grfguard.compiled_monitor``)
+    and the ``Monitor`` around it are plain Python: an edit of them must not drop the
+    monitor loop's cache (minutes of compilation), so no kernel module imports them at
+    top level and they live in no kernel module."""
+    import grfguard.kernels.monitor as km
+
+    src = _jit.kernel_sources(KERNELS)
+    assert not {"grfguard.compiled_monitor", "grfguard.pipeline"} & set(src)
+    for name in ("update_dict", "run_frame", "run_rows", "output_rows", "dict_to_row"):
+        assert not hasattr(km, name), name
+
+
 def test_digests_of_an_import_cycle_terminate() -> None:
     a = b"from .b import g\n"
     b = b"from .a import f\n"
