@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import operator
+import struct
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -55,15 +56,15 @@ def _reason(state: str, t_raw: float, jump: float, valid: bool, reason: str) -> 
     return reason
 
 
-def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
-    """``Monitor.update`` through the compiled step: the same dict (keys in the same
-    order) as the pure-Python stages."""
-    x = k.xbuf
+def _fill_row(x: np.ndarray, vals: Any) -> bool:
+    """``x`` = the values ``vals`` as floats; True when one is None or cannot be a float
+    (NaN then; the input guard names it)."""
+    try:  # numbers, booleans, numpy scalars: packed into x's memory (no None, no text)
+        _pack(x.shape[0])(x, 0, *vals)
+        return False
+    except (struct.error, TypeError, ValueError, OverflowError):
+        pass
     odd = False
-    try:  # every input column in the row (the usual case): one lookup in C
-        vals = k.row_get(row)
-    except (KeyError, TypeError):
-        vals = [row.get(c, math.nan) for c in k.in_cols]
     try:
         x[:] = vals  # one conversion in C (numbers, numeric text, booleans)
         try:  # None -> NaN in that conversion, an error for float(): look for it only
@@ -81,6 +82,29 @@ def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
             except (TypeError, ValueError, OverflowError):
                 x[j] = math.nan
                 odd = True
+    return odd
+
+
+_PACKERS: dict[int, Any] = {}
+
+
+def _pack(n: int) -> Any:
+    """``struct.Struct(f"{n}d").pack_into`` (kept per row length)."""
+    f = _PACKERS.get(n)
+    if f is None:
+        f = _PACKERS[n] = struct.Struct(f"{n}d").pack_into
+    return f
+
+
+def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:
+    """``Monitor.update`` through the compiled step: the same dict (keys in the same
+    order) as the pure-Python stages."""
+    x = k.xbuf
+    try:  # every input column in the row (the usual case): one lookup in C
+        vals = k.row_get(row)
+    except (KeyError, TypeError):
+        vals = [row.get(c, math.nan) for c in k.in_cols]
+    odd = _fill_row(x, vals)
     y = k.step(x, k.ybuf).tolist()
     ex = k.ex
     out: dict[str, Any] = {}
