@@ -180,9 +180,87 @@ def _lean_cache_class():
                 data = self._load_overload(sig, target_context)
             if data is None:
                 target_context.refresh()  # a miss: compiling follows
+                inline_without_copies()
             return data
 
     return LeanFunctionCache
+
+
+#: Set by :func:`inline_without_copies`: True once numba's inliner is patched, False when
+#: numba's code is not the one the patch was written against (nothing changed then).
+_INLINE_PATCHED: bool | None = None
+# numba's code the patch relies on (``InlineWorker.inline_function`` / ``inline_ir``, and
+# the ``InlineInlinables`` pass, the one caller of ``inline_function``, dropping the
+# unmutated copy ``inline_ir`` returns)
+_INLINE_SOURCES = (
+    ("inline_function", "callee_ir = self.run_untyped_passes(function)"),
+    ("inline_function", "return self.inline_ir(caller_ir, block, i, callee_ir, freevars,"),
+    ("inline_ir", "new_block = copy.deepcopy(the_ir.blocks[block_label])"),
+    ("inline_ir", "callee_ir_original = copy_ir(callee_ir)"),
+)
+
+
+class _NoDeepCopy:
+    """``copy`` as ``inline_ir`` sees it while it inlines a fresh IR of its own: the
+    defensive deep copies return the blocks themselves."""
+
+    copy = staticmethod(__import__("copy").copy)
+
+    @staticmethod
+    def deepcopy(x, memo=None):
+        return x
+
+
+def inline_without_copies() -> bool:
+    """Skip two deep copies numba makes of an ``inline="always"`` callee of grfguard's.
+
+    numba (0.68) inlines such a callee by building its IR afresh (the untyped passes over
+    its bytecode, ``InlineWorker.inline_function``), then ``inline_ir`` deep-copies that
+    IR twice, block by block: one copy to mutate, one returned unmutated, which the only
+    caller (the ``InlineInlinables`` pass) drops. A block's deep copy takes the
+    function's whole scope with it, so each copy costs blocks x variables: over the
+    monitor's nested stages that was about 60 % of its compilation (cProfile of
+    :func:`~grfguard.kernels.monitor.warm_monitor` from an empty cache; numba issues
+    #8989, #9204). The fresh IR is the call's own, so for grfguard's functions
+    ``inline_ir`` runs with an identity ``deepcopy``: the same IR is inlined, only not
+    copied. Other functions (a user's numba code) keep numba's behaviour; numba whose code
+    differs from what this was written against is left alone (False). Called on the first
+    compilation of a process (:class:`LeanFunctionCache`'s miss); idempotent."""
+    global _INLINE_PATCHED
+    if _INLINE_PATCHED is not None:
+        return _INLINE_PATCHED
+    _INLINE_PATCHED = False
+    try:
+        import inspect
+
+        from numba.core import inline_closurecall as icc
+        from numba.core import untyped_passes
+
+        worker = icc.InlineWorker
+        src = {n: inspect.getsource(getattr(worker, n)) for n in ("inline_function",
+                                                                   "inline_ir")}
+        caller = inspect.getsource(untyped_passes.InlineInlinables._do_work)
+    except (ImportError, AttributeError, OSError, TypeError):  # pragma: no cover
+        return False
+    if not (all(text in src[n] for n, text in _INLINE_SOURCES)
+            and "_, _, _, new_blocks = \\" in caller):
+        return False  # pragma: no cover - another numba
+    numba_inline = worker.inline_function
+
+    def inline_function(self, caller_ir, block, i, function, arg_typs=None):
+        if not getattr(function, "__module__", "").startswith("grfguard."):
+            return numba_inline(self, caller_ir, block, i, function, arg_typs=arg_typs)
+        callee_ir = self.run_untyped_passes(function)
+        prev, icc.copy = icc.copy, _NoDeepCopy
+        try:
+            return self.inline_ir(caller_ir, block, i, callee_ir,
+                                  function.__code__.co_freevars, arg_typs=arg_typs)
+        finally:
+            icc.copy = prev
+
+    worker.inline_function = inline_function
+    _INLINE_PATCHED = True
+    return True
 
 
 _LEAN_CACHE = _lean_cache_class()

@@ -33,8 +33,10 @@ WARM_DESCRIBED_S = 2.5
 #: itself.
 CHILD_WAIT_S = 600.0
 #: Bytes of free memory :func:`warm_up` wants before it compiles in two processes: the
-#: monitor's loop peaks at about 2.0 GB, the child at 0.7 GB (2026-11-28).
-TWO_PROCESS_BYTES = 3.5e9
+#: monitor's loop peaks at about 1.0 GB since grfguard's functions are inlined without
+#: numba's deep copies (:func:`grfguard.kernels._jit.inline_without_copies`; 2.0 GB
+#: before), the child at 0.7 GB at most (2026-11-28).
+TWO_PROCESS_BYTES = 2.5e9
 
 
 def warm_up(jobs: int | None = None) -> float:
