@@ -37,7 +37,7 @@ SMALL_ROBOT = RobotConfig(
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """Compile (fresh checkout: about 3-5 minutes, once) or load (about 1 s) the
+    """Compile (fresh checkout: about 1.5-2 minutes, once) or load (about 1 s) the
     numba kernels before any test: ``Monitor.for_log`` runs them by default, and
     subprocesses, Dask workers or pytest-xdist workers would otherwise compile them each,
     at the same time."""
