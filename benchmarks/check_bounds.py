@@ -11,7 +11,7 @@ method; Talos's described monitor (its inverse dynamics in vector lanes). An ind
 out of bounds raises ``IndexError`` (the run fails and names the call). Two such writes
 were found this way on 2026-11-27 (BENCHMARKS.md, "SURALP virtual sensor: kinematics
 eight samples at a time"). Not part of ``make test``: compiling everything again takes
-about five minutes of CPU.
+about three minutes of CPU (2 min 12 s wall on two cores, 2026-11-28).
 
 Usage: ``make boundscheck`` (or ``.venv/bin/python benchmarks/check_bounds.py``, which
 sets the environment and runs itself in a child process).

@@ -9,6 +9,7 @@ order allows it.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import re
 from collections.abc import Iterable, Mapping
@@ -204,7 +205,7 @@ class _NoDeepCopy:
     """``copy`` as ``inline_ir`` sees it while it inlines a fresh IR of its own: the
     defensive deep copies return the blocks themselves."""
 
-    copy = staticmethod(__import__("copy").copy)
+    copy = staticmethod(copy.copy)
 
     @staticmethod
     def deepcopy(x, memo=None):
@@ -248,7 +249,7 @@ def inline_without_copies() -> bool:
     numba_inline = worker.inline_function
 
     def inline_function(self, caller_ir, block, i, function, arg_typs=None):
-        if not getattr(function, "__module__", "").startswith("grfguard."):
+        if not (getattr(function, "__module__", None) or "").startswith("grfguard."):
             return numba_inline(self, caller_ir, block, i, function, arg_typs=arg_typs)
         callee_ir = self.run_untyped_passes(function)
         prev, icc.copy = icc.copy, _NoDeepCopy
