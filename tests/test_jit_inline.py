@@ -37,10 +37,11 @@ def top(x):
 """
 
 
-def _make(module: str):
+def _make(module: str | None):
     """A caller with nested ``inline="always"`` callees (loops, branches, an inner callee
-    inlined at several sites), defined in a namespace named ``module``."""
-    ns = {"__name__": module, "numba": numba}
+    inlined at several sites), defined in a namespace named ``module`` (None: a namespace
+    without a name, the functions' ``__module__`` None)."""
+    ns = {"numba": numba} if module is None else {"__name__": module, "numba": numba}
     exec(compile(_SOURCE, f"<{module}>", "exec"), ns)  # noqa: S102 - the test's own code
     return ns["top"]
 
@@ -61,7 +62,7 @@ def _python(x: np.ndarray) -> float:
     return out
 
 
-@pytest.mark.parametrize("module", ["grfguard.kernels.fake", "someone_else.kernels"])
+@pytest.mark.parametrize("module", ["grfguard.kernels.fake", "someone_else.kernels", None])
 def test_inlining_gives_numba_s_results_and_skips_copies_only_for_grfguard(
         monkeypatch, module) -> None:
     assert _jit.inline_without_copies()  # the pinned numba: the patch is on
@@ -75,7 +76,7 @@ def test_inlining_gives_numba_s_results_and_skips_copies_only_for_grfguard(
         x = rng.normal(size=rng.integers(3, 12))
         got, want = compiled(x), _python(x)
         assert got == want or (math.isnan(got) and math.isnan(want)), (got, want)
-    if module.startswith("grfguard."):
+    if module is not None and module.startswith("grfguard."):
         assert copies, "grfguard's callees must be inlined without the deep copies"
     else:
         assert not copies, "another package's numba code keeps numba's inlining"
