@@ -90,3 +90,17 @@ def test_the_patch_is_applied_once_and_says_so() -> None:
     assert _jit.inline_without_copies() is True
     assert icc.InlineWorker.inline_function is first  # not wrapped twice
     assert icc.copy.__name__ == "copy"  # numba's module keeps the real copy outside a call
+
+
+def test_the_environment_switch_keeps_numba_s_inlining(monkeypatch) -> None:
+    """``GRFGUARD_NUMBA_INLINE_COPIES=1`` leaves numba alone (a fresh process's first
+    call; here the module's flag is reset for it)."""
+    from numba.core import inline_closurecall as icc
+
+    monkeypatch.setattr(_jit, "_INLINE_PATCHED", None)
+    monkeypatch.setattr(icc.InlineWorker, "inline_function", icc.InlineWorker.inline_function)
+    monkeypatch.setenv("GRFGUARD_NUMBA_INLINE_COPIES", "1")
+    before = icc.InlineWorker.inline_function
+    assert _jit.inline_without_copies() is False
+    assert icc.InlineWorker.inline_function is before
+    assert _jit.inline_without_copies() is False  # decided once per process

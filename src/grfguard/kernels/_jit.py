@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import os
 import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -225,12 +226,16 @@ def inline_without_copies() -> bool:
     #8989, #9204). The fresh IR is the call's own, so for grfguard's functions
     ``inline_ir`` runs with an identity ``deepcopy``: the same IR is inlined, only not
     copied. Other functions (a user's numba code) keep numba's behaviour; numba whose code
-    differs from what this was written against is left alone (False). Called on the first
-    compilation of a process (:class:`LeanFunctionCache`'s miss); idempotent."""
+    differs from what this was written against is left alone (False), and so is numba
+    when the environment sets ``GRFGUARD_NUMBA_INLINE_COPIES=1`` (numba's own inlining, for
+    a comparison or should this ever misbehave). Called on the first compilation of a
+    process (:class:`LeanFunctionCache`'s miss); idempotent."""
     global _INLINE_PATCHED
     if _INLINE_PATCHED is not None:
         return _INLINE_PATCHED
     _INLINE_PATCHED = False
+    if os.environ.get("GRFGUARD_NUMBA_INLINE_COPIES", "") not in ("", "0"):
+        return False
     try:
         import inspect
 
