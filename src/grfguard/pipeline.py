@@ -313,7 +313,7 @@ class Monitor:
         The virtual sensor is the compiled one (:mod:`grfguard.kernels`; every
         ``config.vfs``); its machine code is loaded from the on-disk cache here (1-2 s once
         per process). A fresh install compiles it and the monitor's loop first: about
-        two minutes once (``grfguard warm-up`` from an empty cache: 93 s on two cores,
+        two minutes once (``grfguard warm-up`` from an empty cache: 93-108 s on two cores,
         122 s on one, 2026-11-28). ``compiled=False`` runs the
         detector's pure-Python stages around it. ``warm=False`` loads nothing here: each
         kernel loads at its first call (a batch run loads only its loop: about 0.3 s
