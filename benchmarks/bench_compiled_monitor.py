@@ -72,6 +72,27 @@ def _stream_dict(mon: Monitor, rows: list[dict], n: int) -> np.ndarray:
     return dts
 
 
+def _first_calls(log: pd.DataFrame, n: int = 5) -> list[tuple[float, float]]:
+    """Wall time [µs] of the first ``update_array`` and the first ``update`` (dict) of
+    ``n`` new monitors (``Monitor.for_log``, which builds the streaming step; kernels
+    loaded), each on the log's first row."""
+    x = None
+    out = []
+    for _ in range(n):
+        arr = Monitor.for_log(log)
+        x = _array_rows(arr, log.iloc[:1])[0] if x is None else x
+        y = np.empty(len(arr.output_columns))
+        t0 = time.perf_counter()
+        arr.update_array(x, y)
+        t1 = time.perf_counter()
+        dic = Monitor.for_log(log)
+        row = log.iloc[0].to_dict()
+        t2 = time.perf_counter()
+        dic.update(row)
+        out.append(((t1 - t0) * 1e6, (time.perf_counter() - t2) * 1e6))
+    return out
+
+
 def _batch(mon: Monitor, log: pd.DataFrame) -> tuple[float, float]:
     """(samples/s wall, CPU µs/sample) of ``mon.run(log)`` (best of two)."""
     best = (0.0, float("inf"))
@@ -163,6 +184,7 @@ def main() -> None:
     ref_us = reference_us()
     touch = fresh_touch_ms(48)  # (the child inherits this process's core)
     first = _first_runs(raw)
+    calls = _first_calls(raw)
     stages = stage_table(suralp_stages(raw), talos_stages(), ref_us)
     load1 = os.getloadavg()[0]
     body = "\n".join([
@@ -178,7 +200,11 @@ def main() -> None:
         "columns it returns, 25 MB per minute of log, into fresh memory without that hint, "
         "`grfguard._memory.small_pages`). The first full `Monitor.run` of the raw log in "
         "a fresh process (kernels loaded, nothing else run): "
-        + ", ".join(f"{v:.2f}" for v in first) + " µs/sample of CPU in three processes.",
+        + ", ".join(f"{v:.2f}" for v in first) + " µs/sample of CPU in three processes. "
+        "The first sample of a new monitor (raw log; `Monitor.for_log` builds the "
+        "streaming step, so the first call does not; five monitors): `update_array` "
+        + ", ".join(f"{a_:.0f}" for a_, _ in calls) + " µs, `update` (dict) "
+        + ", ".join(f"{d:.0f}" for _, d in calls) + " µs.",
         "",
         "Streaming, one sample per call (wall clock per call):",
         "",

@@ -211,6 +211,31 @@ def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: 
         assert o["system_reason"] == b["system_reason"], k
 
 
+def test_for_log_builds_the_streaming_step_before_the_first_sample(walk: pd.DataFrame
+                                                                      ) -> None:
+    """``Monitor.for_log`` builds the compiled streaming step and finds its machine code
+    before any sample (built at the first call, it took that sample about 4-5 ms);
+    ``warm=False`` leaves both to the first call. The state is untouched: both monitors
+    give the same bits."""
+    raw = walk.drop(columns=[c for c in walk.columns if c.startswith(
+        ("vfs_", "com_est_", "contact_est_", "zmp_est"))]).iloc[:200]
+    mon = Monitor.for_log(raw)
+    k = mon._row_kernel
+    assert k is not None and k._entry is not None
+    lazy = Monitor.for_log(raw, warm=False)
+    assert lazy._row_kernel is None
+    X = np.column_stack([raw[c].to_numpy(float) if c in raw else np.full(len(raw), np.nan)
+                         for c in mon.input_columns])
+    got = np.array([mon.update_array(np.ascontiguousarray(x)) for x in X])
+    want = np.array([lazy.update_array(np.ascontiguousarray(x)) for x in X])
+    assert mon._row_kernel is k and lazy._row_kernel is not None
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+    # the monitor of a log with its virtual sensor's columns precomputed too
+    pre = Monitor.for_log(walk.iloc[:50])
+    assert pre.vfs is None and pre._row_kernel is not None
+    assert pre._row_kernel._entry is not None
+
+
 def test_update_array_follows_a_replaced_virtual_sensor(walk: pd.DataFrame) -> None:
     """``update_array`` keeps its compiled step after the first call (the 1 kHz path);
     a virtual sensor replaced on the monitor drops it: the rows then go through the new

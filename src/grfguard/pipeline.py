@@ -315,9 +315,11 @@ class Monitor:
         per process). A fresh install compiles it and the monitor's loop first: about
         two minutes once (``grfguard warm-up`` from an empty cache: 93-108 s on two cores,
         122 s on one, 2026-11-28). ``compiled=False`` runs the
-        detector's pure-Python stages around it. ``warm=False`` loads nothing here: each
-        kernel loads at its first call (a batch run loads only its loop: about 0.3 s
-        less; streaming then pays the load at the first sample)."""
+        detector's pure-Python stages around it. The streaming step is built here too, so
+        the first :meth:`update_array` or :meth:`update` takes microseconds like the
+        others (built at that call, it took about 4-5 ms). ``warm=False`` loads nothing
+        here: each kernel loads at its first call (a batch run loads only its loop: about
+        0.3 s less; streaming then pays the load and the build at the first sample)."""
         cfg = config_for_log(log, config)
         has_vfs = all(vfs_col(s) in log.columns for s in SENSOR_NAMES) and all(
             c in log.columns for c in VFS_TOTAL_COLUMNS
@@ -328,8 +330,15 @@ class Monitor:
 
             vfs = _compiled_or(VirtualForceSensor.for_log(log, cfg.vfs), warm)
         robot = _log_robot(log, vfs, robot)
-        return cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
-                   standing=standing, compiled=compiled)
+        mon = cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
+                  standing=standing, compiled=compiled)
+        if warm:
+            k = mon._kernel()
+            if k is not None:
+                from grfguard.compiled_monitor import prepare_stream
+
+                prepare_stream(k)
+        return mon
 
     def compiled_reason(self) -> str:
         """Empty when the whole monitor runs compiled (:mod:`grfguard.kernels.monitor`:
