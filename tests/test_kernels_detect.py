@@ -214,7 +214,7 @@ def test_compiled_monitor_equals_python_monitor(walk: pd.DataFrame, vfs_inside: 
 def test_for_log_builds_the_streaming_step_before_the_first_sample(walk: pd.DataFrame
                                                                       ) -> None:
     """``Monitor.for_log`` builds the compiled streaming step and finds its machine code
-    before any sample (built at the first call, it took that sample about 4-5 ms);
+    before any sample (built at the first call, it took that sample 3-7 ms);
     ``warm=False`` leaves both to the first call. The state is untouched: both monitors
     give the same bits."""
     raw = walk.drop(columns=[c for c in walk.columns if c.startswith(

@@ -317,7 +317,7 @@ class Monitor:
         122 s on one, 2026-11-28). ``compiled=False`` runs the
         detector's pure-Python stages around it. The streaming step is built here too, so
         the first :meth:`update_array` or :meth:`update` takes microseconds like the
-        others (built at that call, it took about 4-5 ms). ``warm=False`` loads nothing
+        others (built at that call, it took 3-7 ms). ``warm=False`` loads nothing
         here: each kernel loads at its first call (a batch run loads only its loop: about
         0.3 s less; streaming then pays the load and the build at the first sample)."""
         cfg = config_for_log(log, config)
