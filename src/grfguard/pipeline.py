@@ -328,7 +328,7 @@ class Monitor:
         if not has_vfs:
             from grfguard.estimate.vfs import VirtualForceSensor
 
-            vfs = _compiled_or(VirtualForceSensor.for_log(log, cfg.vfs), warm)
+            vfs = _compiled_or(VirtualForceSensor.for_log(log, cfg.vfs, warm=False), warm)
         robot = _log_robot(log, vfs, robot)
         mon = cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
                   standing=standing, compiled=compiled)

@@ -360,10 +360,11 @@ class PythonVFS:
     # ------------------------------------------------------------------ construction
     @classmethod
     def for_log(
-        cls, log: pd.DataFrame, config: VFSConfig | None = None
+        cls, log: pd.DataFrame, config: VFSConfig | None = None, warm: bool = True
     ) -> PythonVFS:
         """A sensor for ``log``: robot from ``log.attrs["robot"]`` (SURALP if absent), the
-        sampling period from the ``time`` column."""
+        sampling period from the ``time`` column (``warm``: as the compiled sensor's
+        signature; nothing to build here)."""
         robot = _robot_from_attrs(getattr(log, "attrs", {}) or {})
         cfg = config if config is not None else VFSConfig()
         if TIME in log.columns and len(log) > 1:

@@ -746,7 +746,8 @@ def _odometry_vertical_acc(log: pd.DataFrame, corr: ModelCorrections | None) -> 
     from grfguard.estimate.vfs import VFSConfig, VirtualForceSensor
 
     lc = apply_corrections(log, corr)
-    out = VirtualForceSensor.for_log(lc, VFSConfig(use_accelerometer=False)).run(lc)
+    out = VirtualForceSensor.for_log(lc, VFSConfig(use_accelerometer=False),
+                                     warm=False).run(lc)
     return (out["vfs_total_r"].to_numpy(float) + out["vfs_total_l"].to_numpy(float)) / (
         robot_of(lc).mass
     )

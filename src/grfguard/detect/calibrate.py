@@ -54,7 +54,7 @@ def _fault_free_statistics(
     else:
         from grfguard.estimate.vfs import VirtualForceSensor
 
-        src = VirtualForceSensor.for_log(log, cfg.vfs).run(log)
+        src = VirtualForceSensor.for_log(log, cfg.vfs, warm=False).run(log)
     inputs = DetectorInputs.from_frames(log, src)
     det = Detector(cfg)
     rows = [det.step(*inputs.sample(k)).diagnostics for k in range(len(log))]
