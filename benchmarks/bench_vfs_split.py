@@ -199,12 +199,12 @@ def main() -> None:
     k = V.VFSKernel(mon.vfs, has_gyro=has_gyro, has_ref=has_ref)
     T = len(X)
     Y = {name: np.empty((T, V.N_OUT)) for name in ("real", "copy", "split")}
-    R = np.zeros((max(blocks), 47))
     with tempfile.TemporaryDirectory(prefix="grfguard-split-") as tmp:
         for name, deco in (("vsplit", CACHED), ("vsplit_asm", UNCACHED)):
             (Path(tmp) / f"{name}.py").write_text(MODULE.format(deco=deco))
         sys.path.insert(0, tmp)
         S = importlib.import_module("vsplit")
+        R = np.zeros((max(blocks), S.NREC))  # the rows' records between the passes
         loops = {"`vfs_run`": lambda: V.vfs_run(X, Y["real"], *k.packed_args()),
                  "a compiled copy of `vfs_run`": lambda: S.run_copy(X, Y["copy"],
                                                                     *k.packed_args())}
