@@ -15,14 +15,30 @@ from the row alone. So the poses are split:
   a unit axis at the body's origin, every SURALP joint, turns two of the parent's
   columns; sines and cosines by :func:`grfguard.kernels.sincos.sincos_flat`), before
   the samples are stepped;
-* **per sample** (:func:`front_pose`): those rotated by the trunk's attitude.
+* **the angular momentum's sums, in blocks** (:func:`_pairs`): the sensor's angular
+  momentum about the CoM is a backward difference of two consecutive samples' body poses.
+  In world axes it needs every body rotated by the attitude first (on SURALP 0.46 µs per
+  sample for the rotation and the differences); in the trunk's axes it is
+  ``Q (sum K D / (2 dt) - e(M D^T) / dt)`` with ``D = Q^T Q'`` from the trunk's attitudes
+  now and before, and ``M`` (9 floats), ``K`` (27) sums over the bodies of the two
+  samples' base-axes poses: joint angles only, so computed in the lanes with the poses
+  (each lane against the lane before it, the first against the last row of the block
+  before), leaving about 150 operations per sample;
+* **per sample** (:func:`front_trunk`): the sites and the CoM rotated by the trunk's
+  attitude, and the sums' place for :func:`grfguard.kernels.vfs._momentum_front`
+  (:func:`front_pose` rotates every body: for tests and other callers).
 
 A sample's poses are taken from the block only when its joint angles are the block's,
-bit for bit; else they are computed for it alone, in floats, by the same functions
-(each lane's operations are the IEEE operations of the float code, with no fused
-multiply-add, so the bits are a lane's). A streamed sample, a batch sample and a sample
-whose row was changed after the block was filled get the same bits: streaming and batch
-stay identical by construction.
+bit for bit, and its sums only when the previous valid sample's angles are also those of
+the row before it in the block; else they are computed for it alone, in floats, by the
+same functions (each lane's operations are the IEEE operations of the float code, with
+no fused multiply-add, so the bits are a lane's). The single poses are kept for the next
+sample, so a streamed sample computes its own poses and not its predecessor's. A
+streamed sample, a batch sample and a sample whose row was changed after the block was
+filled get the same bits: streaming and batch stay identical by construction. Against
+the world-axes differences (the pure-Python reference's order) the momentum differs by
+rounding (about 3e-13 of its size on random poses); the sensor's forces by up to
+about 1e-9 N (``tests/test_kernels_vfs.py``).
 
 Used for trees of one free joint (the trunk, body 1) and one hinge per other body, and
 the default settings' sites (positions only: the paper's anchor attitude and split, which
@@ -40,15 +56,25 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba.extending import register_jitable
+from numba.extending import overload, register_jitable
 
 from grfguard.kernels._jit import njit_nort, view1d, view2d
 from grfguard.kernels.fk import FREE, HINGE, _mm, _mv, _q2m
-from grfguard.kernels.lanes import LANES, lanes2d, lanes_size, lanes_start, splat, vload
+from grfguard.kernels.lanes import (
+    LANES,
+    VecType,
+    lane,
+    lanes2d,
+    lanes_size,
+    lanes_start,
+    shift_in,
+    splat,
+    vload,
+)
 from grfguard.kernels.sincos import SINCOS_MAX, _sincos_one, sincos_flat
 
-__all__ = ["front_constants", "front_ws_size", "front_block", "front_pose", "N_FRONT_SITES",
-           "FB_COLS", "IW_SLOT"]
+__all__ = ["front_constants", "front_ws_size", "front_block", "front_pose", "front_trunk",
+           "N_FRONT_SITES", "N_FRONT_ANGLES", "NPAIR", "FB_COLS", "IW_SLOT"]
 
 #: Sites the sensor poses: the IMU, the 8 corners, the 2 soles.
 N_FRONT_SITES = 11
@@ -72,15 +98,17 @@ def _quat_mat(q: np.ndarray) -> np.ndarray:
         [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def front_constants(tm, joint_qadr: np.ndarray, trunk: int, sites: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray] | None:
+def front_constants(tm, joint_qadr: np.ndarray, trunk: int, sites: np.ndarray,
+                    body_inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """``(floats, ints)`` of :func:`front_block` for the tree ``tm``
     (:class:`~grfguard.kernels.fk.TreeModel`) whose joint angles ``joint_qadr`` (their
     qpos addresses, in row order) the rows carry, or None when the tree is not a free
     trunk (body ``trunk`` = 1) with one hinge per other body, parents first.
 
     Floats: per body (``nb`` rows of :data:`FB_COLS`), then the sites' positions in
-    their bodies' axes (``N_FRONT_SITES`` x 3), then each body's zero angle (``nb``).
+    their bodies' axes (``N_FRONT_SITES`` x 3), each body's zero angle (``nb``), mass
+    (``nb``) and principal inertias (``nb`` x 3, from ``body_inertia`` of bodies 1..),
+    then the mass of bodies 1.. (one float).
     Ints: each body's parent (``nb``), its joint's column in the row (-1: held at its
     zero angle), each site's body (:data:`N_FRONT_SITES`), each body's kind (``nb``: the
     axis 0, 1, 2 of a unit hinge at the body's origin with the parent's axes, else -1),
@@ -126,29 +154,44 @@ def front_constants(tm, joint_qadr: np.ndarray, trunk: int, sites: np.ndarray
     if (sb < 1).any():
         return None
     sp = np.array([tm.site_pos[s] for s in sites], float)
-    floats = np.concatenate([fb.ravel(), sp.ravel(), q0])
+    inertia = np.zeros((nb, 3))
+    inertia[1:] = np.asarray(body_inertia, float).reshape(nb - 1, 3)
+    mass = np.asarray(tm.body_mass, float)
+    floats = np.concatenate([fb.ravel(), sp.ravel(), q0, mass, inertia.ravel(),
+                             [float(mass[1:].sum())]])
     ints = np.concatenate([np.asarray(par, np.int64), qcol, sb, kind, same])
     return np.ascontiguousarray(floats), np.ascontiguousarray(ints)
 
 
+#: Floats of the trunk-frame sums of a sample (:func:`_pairs`): the CoM of bodies 1..
+#: (3), ``M`` (3 x 3) and ``K`` (3 x 3 x 3) of the angular momentum.
+NPAIR = 39
+#: Leading floats of the block that hold joint angles (NaN at the start: no row matches):
+#: the block's rows, the row before them, the block's last row (the carry), the row of
+#: the kept single poses.
+N_FRONT_ANGLES = (LANES + 3) * N_FRONT_Q
+
+
 @register_jitable
 def front_ws_size(nb):
-    """Floats of the block at the end of the sensor's scratch: the joint angles
-    (``LANES`` x 12), angles, sines and cosines (3 x ``nb LANES``), the bodies' frames
-    and the block's poses (vector arrays), then one sample's frames and poses (floats:
-    a sample computed alone)."""
-    return (LANES * N_FRONT_Q + 3 * nb * LANES + lanes_size(nb, 12)
-            + lanes_size(nb + N_FRONT_SITES, _OUT_COLS) + 12 * nb
-            + _OUT_COLS * (nb + N_FRONT_SITES))
+    """Floats of the block at the end of the sensor's scratch: joint angles
+    (:data:`N_FRONT_ANGLES`), angles, sines and cosines (3 x ``nb LANES``), the bodies'
+    frames, the block's poses, its previous rows' poses and its trunk-frame sums (vector
+    arrays), the carry's poses (floats), then one sample's frames, poses and sums and the
+    kept single poses (floats: a sample computed alone)."""
+    return (N_FRONT_ANGLES + 3 * nb * LANES + lanes_size(nb, 12)
+            + lanes_size(nb + N_FRONT_SITES, _OUT_COLS) + lanes_size(nb, _OUT_COLS)
+            + lanes_size(1, NPAIR) + _OUT_COLS * nb + 12 * nb
+            + 2 * _OUT_COLS * (nb + N_FRONT_SITES) + NPAIR)
 
 
 @njit_nort(inline="always")
 def _views(ws, nb, shared):
     """The block's views into ``ws`` (it ends ``shared`` floats before the end) and the
-    offset of ``obuf`` in ``ws``."""
+    offsets of ``obuf`` and ``abuf`` in ``ws``."""
     o = ws.shape[0] - shared - front_ws_size(nb)
     qblk = view2d(ws, o, LANES, N_FRONT_Q)
-    o += LANES * N_FRONT_Q
+    o += N_FRONT_ANGLES
     TH = view1d(ws, o, nb * LANES)
     SN = view1d(ws, o + nb * LANES, nb * LANES)
     CS = view1d(ws, o + 2 * nb * LANES, nb * LANES)
@@ -156,30 +199,58 @@ def _views(ws, nb, shared):
     rbuf = view1d(ws, o, lanes_size(nb, 12))
     o += lanes_size(nb, 12)
     obuf = view1d(ws, o, lanes_size(nb + N_FRONT_SITES, _OUT_COLS))
-    return qblk, TH, SN, CS, rbuf, obuf, o
+    oo = o
+    o += lanes_size(nb + N_FRONT_SITES, _OUT_COLS)
+    pbuf = view1d(ws, o, lanes_size(nb, _OUT_COLS))
+    o += lanes_size(nb, _OUT_COLS)
+    abuf = view1d(ws, o, lanes_size(1, NPAIR))
+    return qblk, TH, SN, CS, rbuf, obuf, oo, pbuf, abuf, o
+
+
+@njit_nort(inline="always")
+def _angle_rows(ws, nb, shared):
+    """The joint angles of the row before the block, of the carry and of the kept single
+    poses (each a (1, 12) array)."""
+    o = ws.shape[0] - shared - front_ws_size(nb) + LANES * N_FRONT_Q
+    return (view2d(ws, o, 1, N_FRONT_Q), view2d(ws, o + N_FRONT_Q, 1, N_FRONT_Q),
+            view2d(ws, o + 2 * N_FRONT_Q, 1, N_FRONT_Q))
 
 
 @njit_nort(inline="always")
 def _single_views(ws, nb, shared):
-    """One sample's frames ``(nb, 12)`` and poses ``(nb + N_FRONT_SITES, 12)`` (floats,
-    the last part of the block) and the offset of the poses in ``ws``."""
-    o = ws.shape[0] - shared - 12 * nb - _OUT_COLS * (nb + N_FRONT_SITES)
+    """One sample's frames ``(nb, 12)``, poses ``(nb + N_FRONT_SITES, 12)``, the kept
+    single poses (same shape), the sums (``NPAIR``) and the carry's poses ``(nb, 12)``
+    (floats, the last part of the block), and the offsets of the poses and sums in
+    ``ws``."""
+    ns = nb + N_FRONT_SITES
+    o = ws.shape[0] - shared - _OUT_COLS * nb - 12 * nb - 2 * _OUT_COLS * ns - NPAIR
+    carry = view2d(ws, o, nb, _OUT_COLS)
+    o += _OUT_COLS * nb
+    RX = view2d(ws, o, nb, 12)
     po = o + 12 * nb
-    return view2d(ws, o, nb, 12), view2d(ws, po, nb + N_FRONT_SITES, _OUT_COLS), po
+    OUT = view2d(ws, po, ns, _OUT_COLS)
+    KEEP = view2d(ws, po + _OUT_COLS * ns, ns, _OUT_COLS)
+    pa = po + 2 * _OUT_COLS * ns
+    return RX, OUT, po, KEEP, view2d(ws, pa, 1, NPAIR), pa, carry
 
 
 @njit_nort(inline="always")
 def _consts(cf, ci, fo, io, nb):
     """Views of :func:`front_constants`' arrays in the packed ``cf``/``ci``."""
     FB = view2d(cf, fo, nb, FB_COLS)
-    FS = view2d(cf, fo + nb * FB_COLS, N_FRONT_SITES, 3)
-    Q0 = view1d(cf, fo + nb * FB_COLS + 3 * N_FRONT_SITES, nb)
+    o = fo + nb * FB_COLS
+    FS = view2d(cf, o, N_FRONT_SITES, 3)
+    o += 3 * N_FRONT_SITES
+    Q0 = view1d(cf, o, nb)
+    FM = view1d(cf, o + nb, nb)
+    FI = view2d(cf, o + 2 * nb, nb, 3)
+    msum = cf[o + 5 * nb]
     par = view1d(ci, io, nb)
     qcol = view1d(ci, io + nb, nb)
     sb = view1d(ci, io + 2 * nb, N_FRONT_SITES)
     kind = view1d(ci, io + 2 * nb + N_FRONT_SITES, nb)
     same = view1d(ci, io + 3 * nb + N_FRONT_SITES, nb)
-    return FB, FS, Q0, par, qcol, sb, kind, same
+    return FB, FS, Q0, par, qcol, sb, kind, same, FM, FI, msum
 
 
 @njit_nort(inline="always")
@@ -250,9 +321,13 @@ def _body_out(i, same, FB, RX, OUT):
 def front_block(cf, ci, fo, io, nb, ws, shared, nt):
     """Poses in base axes of the ``nt`` (1 .. ``LANES``) samples whose joint angles are
     in the block's rows ``qblk[0:nt]`` (rows ``nt..`` are set to the last one's, whose
-    lanes they repeat): per body its CoM and inertial axes, per site its position."""
-    FB, FS, Q0, par, qcol, sb, kind, same = _consts(cf, ci, fo, io, nb)
-    qblk, TH, SN, CS, rbuf, obuf, oo = _views(ws, nb, shared)
+    lanes they repeat): per body its CoM and inertial axes, per site its position; and
+    each sample's trunk-frame sums (:func:`_pairs`) with the row before it: the block's
+    previous row, or for the first the last row of the block before (the carry)."""
+    FB, FS, Q0, par, qcol, sb, kind, same, FM, FI, msum = _consts(cf, ci, fo, io, nb)
+    qblk, TH, SN, CS, rbuf, obuf, oo, pbuf, abuf, ao = _views(ws, nb, shared)
+    qbefore, qcarry, qkeep = _angle_rows(ws, nb, shared)
+    carry = _single_views(ws, nb, shared)[6]
     for j in range(nt, LANES):
         for k in range(N_FRONT_Q):
             qblk[j, k] = qblk[nt - 1, k]
@@ -272,8 +347,21 @@ def front_block(cf, ci, fo, io, nb, ws, shared, nt):
         else:
             _pose_body(i, par[i], c, s, FB, RX)
     _outputs(nb, FB, FS, same, sb, RX, OUT)
+    # the previous rows' poses: lane 0 the carry, lane j the block's lane j - 1
+    PRV = lanes2d(pbuf, nb, _OUT_COLS)
+    for i in range(1, nb):
+        for k in range(_OUT_COLS):
+            v = OUT[i, k]
+            PRV[i, k] = shift_in(v, carry[i, k])
+            carry[i, k] = lane(v, nt - 1)
+    for k in range(N_FRONT_Q):
+        qbefore[0, k] = qcarry[0, k]
+        qcarry[0, k] = qblk[nt - 1, k]
+    _pairs(nb, FM, FI, msum, OUT, PRV, lanes2d(abuf, 1, NPAIR))
     rbuf[0] = rbuf[0]  # (the vector views borrow the buffers)
     obuf[0] = obuf[0]
+    pbuf[0] = pbuf[0]
+    abuf[0] = abuf[0]
 
 
 @njit_nort(inline="always")
@@ -291,17 +379,120 @@ def _outputs(nb, FB, FS, same, sb, RX, OUT):
         OUT[nb + s, 2] = RX[b, 11] + p2
 
 
+def _zero(v):  # pragma: no cover (compiled only)
+    """A zero of ``v``'s type (a vector or a float)."""
+
+
+@overload(_zero)
+def _ov_zero(v):
+    if isinstance(v, VecType):
+        return lambda v: splat(0.0)
+    return lambda v: 0.0
+
+
 @njit_nort(inline="always")
-def _single(x, cf, ci, fo, io, nb, ws, shared):
-    """:func:`front_block` for the row ``x`` alone in floats (each operation the one of a
-    lane: the same bits); returns the offset of its poses in ``ws``."""
-    FB, FS, Q0, par, qcol, sb, kind, same = _consts(cf, ci, fo, io, nb)
-    RX, OUT, po = _single_views(ws, nb, shared)
+def _com(nb, FM, msum, OUT):
+    """The CoM of bodies 1.. in base axes from their CoMs ``OUT[i, 0:3]``."""
+    c0, c1, c2 = OUT[1, 0] * FM[1], OUT[1, 1] * FM[1], OUT[1, 2] * FM[1]
+    for i in range(2, nb):
+        c0 += OUT[i, 0] * FM[i]
+        c1 += OUT[i, 1] * FM[i]
+        c2 += OUT[i, 2] * FM[i]
+    return c0 / msum, c1 / msum, c2 / msum
+
+
+@njit_nort(inline="always")
+def _kacc(K, j00, j01, j02, j11, j12, j22, g00, g01, g02, g10, g11, g12, g20, g21, g22):
+    """``K`` (27 values, ``K[a, c, l]`` at ``9 a + 3 c + l``) plus one body's terms:
+    ``K[a, :, l] -= J[a, :] x G[:, l]`` (``J`` symmetric)."""
+    return (K[0] + (j02 * g10 - j01 * g20),
+            K[1] + (j02 * g11 - j01 * g21),
+            K[2] + (j02 * g12 - j01 * g22),
+            K[3] + (j00 * g20 - j02 * g00),
+            K[4] + (j00 * g21 - j02 * g01),
+            K[5] + (j00 * g22 - j02 * g02),
+            K[6] + (j01 * g00 - j00 * g10),
+            K[7] + (j01 * g01 - j00 * g11),
+            K[8] + (j01 * g02 - j00 * g12),
+            K[9] + (j12 * g10 - j11 * g20),
+            K[10] + (j12 * g11 - j11 * g21),
+            K[11] + (j12 * g12 - j11 * g22),
+            K[12] + (j01 * g20 - j12 * g00),
+            K[13] + (j01 * g21 - j12 * g01),
+            K[14] + (j01 * g22 - j12 * g02),
+            K[15] + (j11 * g00 - j01 * g10),
+            K[16] + (j11 * g01 - j01 * g11),
+            K[17] + (j11 * g02 - j01 * g12),
+            K[18] + (j22 * g10 - j12 * g20),
+            K[19] + (j22 * g11 - j12 * g21),
+            K[20] + (j22 * g12 - j12 * g22),
+            K[21] + (j02 * g20 - j22 * g00),
+            K[22] + (j02 * g21 - j22 * g01),
+            K[23] + (j02 * g22 - j22 * g02),
+            K[24] + (j12 * g00 - j02 * g10),
+            K[25] + (j12 * g01 - j02 * g11),
+            K[26] + (j12 * g02 - j02 * g12))
+
+
+@njit_nort(inline="always")
+def _pairs(nb, FM, FI, msum, OUT, PRV, P):
+    """The trunk-frame sums of a sample's angular momentum from its body poses ``OUT``
+    and the previous sample's ``PRV`` (base axes; vectors or floats alike) into ``P[0]``:
+    the CoM ``c`` (0:3), ``M = sum m (r - c)(r' - c')^T`` (3:12, row-major) and
+    ``K[a, c, l] = sum_i sum_d J_ad dv_d/dD_cl`` (12:39, at ``12 + 9 a + 3 c + l``), with
+    ``J = E diag(I) E^T`` a body's inertia and ``G = E E'^T`` its rotation step in base
+    axes and ``v = vee(G D^T - D G^T)``. For the trunk's attitudes ``Q`` now and ``Q'``
+    before and ``D = Q^T Q'`` the angular momentum about the CoM is then
+    ``Q (sum K D / (2 dt) - e(M D^T) / dt)`` (``e(N)_a = eps_abc N_bc``), the finite
+    differences of the world poses (:func:`grfguard.kernels.vfs._angular_momentum`)."""
+    c0, c1, c2 = _com(nb, FM, msum, OUT)
+    d0, d1, d2 = _com(nb, FM, msum, PRV)
+    P[0, 0], P[0, 1], P[0, 2] = c0, c1, c2
+    z = _zero(c0)
+    M = (z, z, z, z, z, z, z, z, z)
+    K = (z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z)
+    for i in range(1, nb):
+        m = FM[i]
+        u0, u1, u2 = (OUT[i, 0] - c0) * m, (OUT[i, 1] - c1) * m, (OUT[i, 2] - c2) * m
+        w0, w1, w2 = PRV[i, 0] - d0, PRV[i, 1] - d1, PRV[i, 2] - d2
+        M = (M[0] + u0 * w0, M[1] + u0 * w1, M[2] + u0 * w2, M[3] + u1 * w0, M[4] + u1 * w1,
+             M[5] + u1 * w2, M[6] + u2 * w0, M[7] + u2 * w1, M[8] + u2 * w2)
+        e00, e01, e02 = OUT[i, 3], OUT[i, 4], OUT[i, 5]
+        e10, e11, e12 = OUT[i, 6], OUT[i, 7], OUT[i, 8]
+        e20, e21, e22 = OUT[i, 9], OUT[i, 10], OUT[i, 11]
+        f00, f01, f02 = PRV[i, 3], PRV[i, 4], PRV[i, 5]
+        f10, f11, f12 = PRV[i, 6], PRV[i, 7], PRV[i, 8]
+        f20, f21, f22 = PRV[i, 9], PRV[i, 10], PRV[i, 11]
+        i0, i1, i2 = FI[i, 0], FI[i, 1], FI[i, 2]
+        a00, a01, a02 = e00 * i0, e01 * i1, e02 * i2
+        a10, a11, a12 = e10 * i0, e11 * i1, e12 * i2
+        a20, a21, a22 = e20 * i0, e21 * i1, e22 * i2
+        j00 = a00 * e00 + a01 * e01 + a02 * e02
+        j01 = a00 * e10 + a01 * e11 + a02 * e12
+        j02 = a00 * e20 + a01 * e21 + a02 * e22
+        j11 = a10 * e10 + a11 * e11 + a12 * e12
+        j12 = a10 * e20 + a11 * e21 + a12 * e22
+        j22 = a20 * e20 + a21 * e21 + a22 * e22
+        g00, g10, g20 = _mv(e00, e01, e02, e10, e11, e12, e20, e21, e22, f00, f01, f02)
+        g01, g11, g21 = _mv(e00, e01, e02, e10, e11, e12, e20, e21, e22, f10, f11, f12)
+        g02, g12, g22 = _mv(e00, e01, e02, e10, e11, e12, e20, e21, e22, f20, f21, f22)
+        K = _kacc(K, j00, j01, j02, j11, j12, j22, g00, g01, g02, g10, g11, g12, g20, g21,
+                  g22)
+    for k in range(9):
+        P[0, 3 + k] = M[k]
+    for k in range(27):
+        P[0, 12 + k] = K[k]
+
+
+@njit_nort(inline="always")
+def _single_at(q, FB, FS, Q0, par, qcol, sb, kind, same, RX, OUT):
+    """:func:`front_block`'s poses for the joint angles ``q`` (a row's first 12 values)
+    alone in floats into ``OUT`` (each operation the one of a lane: the same bits)."""
     for k in range(12):
         RX[1, k] = 1.0 if (k == 0 or k == 4 or k == 8) else 0.0
-    for i in range(2, nb):
+    for i in range(2, nb_of(RX)):
         c = qcol[i]
-        th = x[c] - Q0[i] if c >= 0 else 0.0
+        th = q[c] - Q0[i] if c >= 0 else 0.0
         s, co = _sincos_one(th)
         if abs(th) > SINCOS_MAX:
             s, co = math.sin(th), math.cos(th)
@@ -309,7 +500,22 @@ def _single(x, cf, ci, fo, io, nb, ws, shared):
             _pose_unit(i, par[i], kind[i], co, s, FB, RX)
         else:
             _pose_body(i, par[i], co, s, FB, RX)
-    _outputs(nb, FB, FS, same, sb, RX, OUT)
+    _outputs(nb_of(RX), FB, FS, same, sb, RX, OUT)
+
+
+@njit_nort(inline="always")
+def nb_of(RX):
+    """Bodies of a frames array."""
+    return RX.shape[0]
+
+
+@njit_nort(inline="always")
+def _single(x, cf, ci, fo, io, nb, ws, shared):
+    """:func:`front_block` for the row ``x`` alone in floats (each operation the one of a
+    lane: the same bits); returns the offset of its poses in ``ws``."""
+    FB, FS, Q0, par, qcol, sb, kind, same, FM, FI, msum = _consts(cf, ci, fo, io, nb)
+    RX, OUT, po, KEEP, PA, pa, carry = _single_views(ws, nb, shared)
+    _single_at(x, FB, FS, Q0, par, qcol, sb, kind, same, RX, OUT)
     return po
 
 
@@ -330,7 +536,7 @@ def front_pose(x, cf, ci, fo, io, nb, ws, iws, shared, tw, tx, ty, tz, xipos, xi
     ``sxp`` with the trunk at the origin and its attitude the unit quaternion ``t``: from
     the block's lane of the row (``iws[IW_SLOT]``) when its joint angles are the lane's,
     else computed for the row alone (:func:`_single`, the same bits)."""
-    qblk, TH, SN, CS, rbuf, obuf, oo = _views(ws, nb, shared)
+    qblk, TH, SN, CS, rbuf, obuf, oo, pbuf, abuf, ao = _views(ws, nb, shared)
     j = iws[IW_SLOT]
     if j >= 0 and _same_angles(x, qblk, j):  # pose (r, c) at ws[st + (12 r + c) step]
         st, step = oo + lanes_start(obuf) + j, LANES
@@ -347,8 +553,65 @@ def front_pose(x, cf, ci, fo, io, nb, ws, iws, shared, tw, tx, ty, tz, xipos, xi
             v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, ws[m], ws[m + 3 * step],
                              ws[m + 6 * step])
             ximat[i, c], ximat[i, 3 + c], ximat[i, 6 + c] = v0, v1, v2
+    _sites(ws, st, step, nb, r0, r1, r2, r3, r4, r5, r6, r7, r8, sxp)
+
+
+@njit_nort(inline="always")
+def _sites(ws, st, step, nb, r0, r1, r2, r3, r4, r5, r6, r7, r8, sxp):
+    """The sites' positions of the poses at ``ws[st]`` (stride ``step``) rotated by the
+    row-major ``r`` into ``sxp``."""
     for s in range(N_FRONT_SITES):
         b = st + (nb + s) * _OUT_COLS * step
         v0, v1, v2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, ws[b], ws[b + step],
                          ws[b + 2 * step])
         sxp[s, 0], sxp[s, 1], sxp[s, 2] = v0, v1, v2
+
+
+@njit_nort(inline="always")
+def front_trunk(x, qprev, has_prev, cf, ci, fo, io, nb, ws, iws, shared, r0, r1, r2, r3, r4,
+                r5, r6, r7, r8, sxp):
+    """The row ``x``'s sites ``sxp`` with the trunk at the origin and its attitude the
+    row-major rotation ``r``, its CoM (3 floats, world axes) and the offset and stride in
+    ``ws`` of its trunk-frame sums (:func:`_pairs`) with the previous valid sample, whose
+    joint angles are ``qprev`` (-1: ``has_prev`` False, no sums). From the block's lane of
+    the row (``iws[IW_SLOT]``) when the lane's angles and the angles before it are the
+    rows', else computed for the row alone (the same bits); the single poses are kept for
+    the next sample (a streamed sample finds its predecessor's there)."""
+    FB, FS, Q0, par, qcol, sb, kind, same, FM, FI, msum = _consts(cf, ci, fo, io, nb)
+    qblk, TH, SN, CS, rbuf, obuf, oo, pbuf, abuf, ao = _views(ws, nb, shared)
+    qbefore, qcarry, qkeep = _angle_rows(ws, nb, shared)
+    RX, OUT, po, KEEP, PA, pa, carry = _single_views(ws, nb, shared)
+    j = iws[IW_SLOT]
+    lane = j >= 0 and _same_angles(x, qblk, j)
+    if lane:
+        st, step = oo + lanes_start(obuf) + j, LANES
+        pst = ao + lanes_start(abuf) + j
+        if has_prev and not (_same_angles(qprev, qblk, j - 1) if j > 0 else
+                             _same_angles(qprev, qbefore, 0)):
+            lane = False
+    else:
+        st, step = po, 1
+    if not lane:
+        pst, pstep = pa, 1
+        _single_at(x, FB, FS, Q0, par, qcol, sb, kind, same, RX, OUT)
+        if has_prev:
+            if not _same_angles(qprev, qkeep, 0):
+                _single_at(qprev, FB, FS, Q0, par, qcol, sb, kind, same, RX, KEEP)
+            _pairs(nb, FM, FI, msum, OUT, KEEP, PA)
+        else:
+            c0, c1, c2 = _com(nb, FM, msum, OUT)
+            PA[0, 0], PA[0, 1], PA[0, 2] = c0, c1, c2
+        for r in range(1, nb):
+            for k in range(_OUT_COLS):
+                KEEP[r, k] = OUT[r, k]
+        for k in range(N_FRONT_Q):
+            qkeep[0, k] = x[k]
+        if step == LANES:  # the lane's poses are the row's: the same bits
+            st, step = po, 1
+    else:
+        pstep = LANES
+    _sites(ws, st, step, nb, r0, r1, r2, r3, r4, r5, r6, r7, r8, sxp)
+    c0, c1, c2 = _mv(r0, r1, r2, r3, r4, r5, r6, r7, r8, ws[pst], ws[pst + pstep],
+                     ws[pst + 2 * pstep])
+    return c0, c1, c2, (pst if has_prev else -1), pstep
+

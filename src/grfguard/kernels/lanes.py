@@ -93,6 +93,20 @@ def lane(typingctx, v, j):
 
 
 @intrinsic
+def shift_in(typingctx, v, x):
+    """``v``'s lanes moved up by one, the float ``x`` in lane 0: ``[x, v[0], ...,
+    v[LANES - 2]]``."""
+    if not (isinstance(v, VecType) and isinstance(x, types.Float)):
+        return None
+
+    def codegen(context, builder, sig, args):
+        mask = ir.Constant(ir.VectorType(_I32, LANES), [LANES] + list(range(LANES - 1)))
+        return builder.shuffle_vector(args[0], _splat(builder, args[1]), mask)
+
+    return vec(v, x), codegen
+
+
+@intrinsic
 def vload(typingctx, buf, off):
     """``buf[off : off + LANES]`` of a 1-D C-contiguous float64 array as a vector (any
     alignment; bounds are the caller's)."""
@@ -202,5 +216,5 @@ def _ov_neg(a):
         return lambda a: _neg(a)
 
 
-__all__ = ["LANES", "vec", "VecType", "lanes_size", "splat", "lane", "vload", "lanes2d",
-           "lanes_start"]
+__all__ = ["LANES", "vec", "VecType", "lanes_size", "splat", "lane", "shift_in", "vload",
+           "lanes2d", "lanes_start"]

@@ -51,6 +51,8 @@ from grfguard.io.schema import (
 from grfguard.kernels._jit import fma, njit_nort, view1d, view2d
 from grfguard.kernels.fk import (
     TreeModel,
+    _mv,
+    _q2m,
     fk_bodies_kind,
     fk_site_pos,
     fk_sites,
@@ -58,9 +60,10 @@ from grfguard.kernels.fk import (
 )
 from grfguard.kernels.front import (
     IW_SLOT,
+    N_FRONT_ANGLES,
     front_block,
     front_constants,
-    front_pose,
+    front_trunk,
     front_ws_size,
 )
 from grfguard.kernels.lanes import LANES
@@ -218,6 +221,8 @@ def _step(x, y, state, cf, ci, ws, iws):
     Returns True for a valid sample.
 
     Stages: validity, attitude filter, kinematics, stance, leg odometry, raw rates,
+    angular momentum rate (in the trunk's axes from the block's sums when the block
+    kinematics cover the tree, :func:`_momentum_front`; else from the world-axes poses),
     filters, ZMP (Newton-Euler), corner contact, compliance prior + QP, outputs.
     """
     prm, iprm, body_inertia, corner_radius, filt_b, filt_a, filt_zi, tree, sites = _unpack(
@@ -234,14 +239,16 @@ def _step(x, y, state, cf, ci, ws, iws):
      v3c, v3d, pk, tmp8, prior8, rel8, forces, lin, cc, qp_x, qp_z, qp_M, qp_rhs, qp_dots,
      tail) = _scratch_views(ws, nq, nb)
     aw, ax, ay, az = _attitude_filter(x, state, prm)
-    if prm[_P_FRONT_CF] != 0.0:  # the poses from the block (grfguard.kernels.front)
-        p_AC0, p_AC1, p_AC2 = _kinematics_front(x, prm, iprm, tree, cf, ci, ws, iws,
-                                                corner_radius, aw, ax, ay, az, xipos, ximat,
-                                                stc, msub, sxp, pk)
+    front = prm[_P_FRONT_CF] != 0.0
+    if front:  # the poses from the block (grfguard.kernels.front)
+        p_AC0, p_AC1, p_AC2, pst, pstep = _kinematics_front(
+            x, state, prm, iprm, cf, ci, ws, iws, corner_radius, aw, ax, ay, az, sxp, sxm, pk,
+            order)
     else:
         p_AC0, p_AC1, p_AC2 = _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax,
                                           ay, az, qpos, xpos, xquat, xmat, xipos, ximat, stc,
                                           msub, sxp, sxm, qin, pk, tail, view1d(iws, 32, 11))
+        pst, pstep = -1, 1
     st0, st1 = _stance(x, prm, pk)
     xo = _S_FIXED + 15 * order + 12 * (nb - 1)  # state of the vfs_paper stages
     if prm[P_KANC] > 0.0:  # vfs_paper: anchor attitude (rotates the frames)
@@ -261,8 +268,11 @@ def _step(x, y, state, cf, ci, ws, iws):
             x, state, xo, prm, pk, pwt0, pwt1, pwt2, com0, com1, com2, ground, aw, ax, ay, az)
     else:
         _raw_rates(state, raw, sxp, pwt0, pwt1, pwt2, p_AC0, p_AC1, p_AC2, dt)
-        _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc, nb,
-                       order, dt)
+        if front:
+            _momentum_front(x, state, raw, ws, pst, pstep, sxm, order, dt)
+        else:
+            _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, cc,
+                           nb, order, dt)
         _keep_shared(ws, pwt0, pwt1, pwt2, ground, com0, com1, com2, st0, st1, aw, ax, ay, az)
         F0, F1, F2, zmp0, zmp1 = _rates_to_zmp(x, state, prm, filt_b, filt_a, filt_zi, raw,
                                                main, v3a, v3b, v3c, v3d, aw, ax, ay, az,
@@ -525,23 +535,27 @@ def _trunk_quat(prm, aw, ax, ay, az):
 
 
 @njit_nort(inline="always")
-def _kinematics_front(x, prm, iprm, tree, cf, ci, ws, iws, corner_radius, aw, ax, ay, az,
-                      xipos, ximat, stc, msub, sxp, pk):
+def _kinematics_front(x, state, prm, iprm, cf, ci, ws, iws, corner_radius, aw, ax, ay, az,
+                      sxp, sxm, pk, order):
     """:func:`_kinematics` from the block of :mod:`grfguard.kernels.front` (the default
-    settings: body CoMs and inertial axes, site positions; not the bodies' origins and
-    axes, not the sites' axes)."""
+    settings): the sites and the trunk-relative CoM (3 floats) [m], then the offset and
+    stride in ``ws`` of the trunk-frame sums of the angular momentum with the previous
+    valid sample (offset -1: none); the trunk's rotation (row-major) kept in ``sxm[0]``.
+    No body poses in world axes (:func:`_momentum_front` needs none)."""
     tw, tx, ty, tz = _trunk_quat(prm, aw, ax, ay, az)
-    for k in range(3):
-        xipos[0, k] = 0.0
-    for k in range(9):
-        ximat[0, k] = 1.0 if (k == 0 or k == 4 or k == 8) else 0.0
-    front_pose(x, cf, ci, int(prm[_P_FRONT_CF]), int(prm[_P_FRONT_CI]), ci[0], ws, iws,
-               N_SHARED, tw, tx, ty, tz, xipos, ximat, sxp)
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = _q2m(tw, tx, ty, tz)
+    a = _S_FIXED + 15 * order
+    c0, c1, c2, pst, pstep = front_trunk(
+        x, view1d(state, a, _NJ), state[_S_PREVF] != 0.0, cf, ci, int(prm[_P_FRONT_CF]),
+        int(prm[_P_FRONT_CI]), ci[0], ws, iws, N_SHARED, r0, r1, r2, r3, r4, r5, r6, r7, r8,
+        sxp)
+    (sxm[0, 0], sxm[0, 1], sxm[0, 2], sxm[0, 3], sxm[0, 4], sxm[0, 5], sxm[0, 6], sxm[0, 7],
+     sxm[0, 8]) = r0, r1, r2, r3, r4, r5, r6, r7, r8
     for k in range(8):
         pk[k, 0] = sxp[1 + k, 0]
         pk[k, 1] = sxp[1 + k, 1]
         pk[k, 2] = sxp[1 + k, 2] - corner_radius[k]
-    return subtree_com_of(iprm[_IP_TRUNK], tree[0], tree[8], xipos, stc, msub)
+    return c0, c1, c2, pst, pstep
 
 
 @njit_nort(inline="always")
@@ -677,6 +691,63 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
         for k in range(9):
             pr[i, k] = ximat[i + 1, k]
     state[_S_PREVF] = 1.0
+
+
+@njit_nort(inline="always")
+def _momentum_front(x, state, raw, ws, pst, pstep, sxm, order, dt):
+    """:func:`_momentum_rate` from the trunk-frame sums at ``ws[pst]`` (stride ``pstep``;
+    :func:`grfguard.kernels.front.front_trunk`, -1: no previous sample) and the trunk's
+    rotation now (``sxm[0]``) and before (kept in ``state`` with the joint angles of this
+    sample: the previous poses are the block's)."""
+    a = _S_FIXED + 15 * order
+    if pst >= 0:
+        q = view1d(state, a + _NJ, 9)
+        r = sxm[0]
+        # D = Q^T Q' (row-major)
+        D = (r[0] * q[0] + r[3] * q[3] + r[6] * q[6], r[0] * q[1] + r[3] * q[4] + r[6] * q[7],
+             r[0] * q[2] + r[3] * q[5] + r[6] * q[8], r[1] * q[0] + r[4] * q[3] + r[7] * q[6],
+             r[1] * q[1] + r[4] * q[4] + r[7] * q[7], r[1] * q[2] + r[4] * q[5] + r[7] * q[8],
+             r[2] * q[0] + r[5] * q[3] + r[8] * q[6], r[2] * q[1] + r[5] * q[4] + r[8] * q[7],
+             r[2] * q[2] + r[5] * q[5] + r[8] * q[8])
+        M = (ws[pst + 3 * pstep], ws[pst + 4 * pstep], ws[pst + 5 * pstep],
+             ws[pst + 6 * pstep], ws[pst + 7 * pstep], ws[pst + 8 * pstep],
+             ws[pst + 9 * pstep], ws[pst + 10 * pstep], ws[pst + 11 * pstep])
+        # e(M D^T): (M D^T)_bc = sum_l M_bl D_cl
+        n12 = M[3] * D[6] + M[4] * D[7] + M[5] * D[8]
+        n21 = M[6] * D[3] + M[7] * D[4] + M[8] * D[5]
+        n20 = M[6] * D[0] + M[7] * D[1] + M[8] * D[2]
+        n02 = M[0] * D[6] + M[1] * D[7] + M[2] * D[8]
+        n01 = M[0] * D[3] + M[1] * D[4] + M[2] * D[5]
+        n10 = M[3] * D[0] + M[4] * D[1] + M[5] * D[2]
+        s0 = _kd(ws, pst + 12 * pstep, pstep, D)
+        s1 = _kd(ws, pst + 21 * pstep, pstep, D)
+        s2 = _kd(ws, pst + 30 * pstep, pstep, D)
+        v0 = s0 / (2.0 * dt) - (n12 - n21) / dt
+        v1 = s1 / (2.0 * dt) - (n20 - n02) / dt
+        v2 = s2 / (2.0 * dt) - (n01 - n10) / dt
+        L0, L1, L2 = _mv(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], v0, v1, v2)
+        if state[_S_PREVL_OK] != 0.0:
+            raw[3] = (L0 - state[_S_PREVL]) / dt
+            raw[4] = (L1 - state[_S_PREVL + 1]) / dt
+            raw[5] = (L2 - state[_S_PREVL + 2]) / dt
+        state[_S_PREVL] = L0
+        state[_S_PREVL + 1] = L1
+        state[_S_PREVL + 2] = L2
+        state[_S_PREVL_OK] = 1.0
+    for k in range(_NJ):
+        state[a + k] = x[_I_Q + k]
+    for k in range(9):
+        state[a + _NJ + k] = sxm[0, k]
+    state[_S_PREVF] = 1.0
+
+
+@njit_nort(inline="always")
+def _kd(ws, o, step, D):
+    """``sum_(c, l) K[a, c, l] D_cl`` of one row ``a`` of ``K`` at ``ws[o]``."""
+    s = ws[o] * D[0]
+    for k in range(1, 9):
+        s += ws[o + k * step] * D[k]
+    return s
 
 
 @njit_nort(inline="always")
@@ -1375,7 +1446,7 @@ class VFSKernel:
         # (the paper's anchor attitude and split read the sites' axes: MuJoCo's order)
         front = None if (prm[P_KANC] > 0.0 or prm[P_SPLIT_PAPER] != 0.0) else front_constants(
             tm, ip[_IP_JOINTS:_IP_JOINTS + _NJ], int(ip[_IP_TRUNK]),
-            ip[_IP_IMU:_IP_SOLES + 2])
+            ip[_IP_IMU:_IP_SOLES + 2], self.body_inertia)
         if front is not None:
             prm[_P_FRONT_CF] = sum(a.size for a in cf)
             prm[_P_FRONT_CI] = sum(a.size for a in ci)
@@ -1387,7 +1458,7 @@ class VFSKernel:
         nf = front_ws_size(nb)
         self.ws = np.zeros(2 * tm.nq + 32 * nb + 500 + nf)
         # the block's joint angles: none yet (NaN matches no row)
-        self.ws[self.ws.size - N_SHARED - nf:][:LANES * _NJ] = np.nan
+        self.ws[self.ws.size - N_SHARED - nf:][:N_FRONT_ANGLES] = np.nan
         self.iws = np.zeros(64, np.int64)
         self.iws[IW_SLOT] = -1
         self.reset()
