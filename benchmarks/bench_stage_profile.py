@@ -37,11 +37,11 @@ import numpy as np
 # starts there)
 VFS_MARKS = [
     ("    aw, ax, ay, az = _attitude_filter", "attitude filter"),
-    ("    if prm[_P_FRONT_CF] != 0.0:", "kinematics: trunk rotation of the poses, trunk CoM"),
+    ("    front = prm[_P_FRONT_CF] != 0.0", "kinematics: sites, CoM, momentum sums' place"),
     ("    st0, st1 = _stance", "stance"),
     ("    xo = _S_FIXED", "leg odometry"),
     ("        _raw_rates(", "raw rates"),
-    ("        _momentum_rate(", "momentum rate: CoM, angular momentum, poses kept"),
+    ("        if front:\n            _momentum_front(", "momentum rate from the trunk-frame sums"),
     ("        _keep_shared(", "filters and ZMP"),
     ("    _split_outputs(", "corner contact, force split, outputs"),
 ]

@@ -23,8 +23,9 @@ FORCE_COLS = [c for c in VFS_OUTPUT_COLUMNS if c.startswith("vfs_") and c != "vf
 #: Corner forces, totals [N]. Rounding differences: the QP (nnls vs. ours) and the
 #: kinematics (the kernel poses the bodies in base axes, eight samples at a time
 #: (grfguard.kernels.front), the reference in MuJoCo's order: positions within about
-#: 1e-15 m, which the rates' second differences multiply by 1 / dt^2 = 1e6). Measured
-#: up to 3e-9 N over this module's walks and settings.
+#: 1e-15 m, which the rates' second differences multiply by 1 / dt^2 = 1e6), and the
+#: angular momentum (the kernel's from trunk-frame sums, the reference's from world-axes
+#: poses). Measured up to 3e-9 N over this module's walks and settings.
 TOL_N = 1e-8
 #: ZMP [m]: the same rates (measured up to 7e-13 m, 2e-10 m without the gyro).
 TOL_ZMP = 1e-9
