@@ -677,20 +677,27 @@ def _momentum_rate(state, prm, raw, xipos, ximat, body_mass, body_inertia, lin, 
             cc[k] = s / msum
         L0, L1, L2 = _angular_momentum(xipos, ximat, body_mass, body_inertia, pb, pr, lin, cc,
                                        nbr, dt)
-        if state[_S_PREVL_OK] != 0.0:
-            raw[3] = (L0 - state[_S_PREVL]) / dt
-            raw[4] = (L1 - state[_S_PREVL + 1]) / dt
-            raw[5] = (L2 - state[_S_PREVL + 2]) / dt
-        state[_S_PREVL] = L0
-        state[_S_PREVL + 1] = L1
-        state[_S_PREVL + 2] = L2
-        state[_S_PREVL_OK] = 1.0
+        _rate_of(state, raw, L0, L1, L2, dt)
     for i in range(nbr):
         for k in range(3):
             pb[i, k] = xipos[i + 1, k]
         for k in range(9):
             pr[i, k] = ximat[i + 1, k]
     state[_S_PREVF] = 1.0
+
+
+@njit_nort(inline="always")
+def _rate_of(state, raw, L0, L1, L2, dt):
+    """The momentum rate ``raw[3:6]`` [N m] from the angular momentum ``L`` now and the
+    one kept in ``state`` (if any); ``L`` kept for the next sample."""
+    if state[_S_PREVL_OK] != 0.0:
+        raw[3] = (L0 - state[_S_PREVL]) / dt
+        raw[4] = (L1 - state[_S_PREVL + 1]) / dt
+        raw[5] = (L2 - state[_S_PREVL + 2]) / dt
+    state[_S_PREVL] = L0
+    state[_S_PREVL + 1] = L1
+    state[_S_PREVL + 2] = L2
+    state[_S_PREVL_OK] = 1.0
 
 
 @njit_nort(inline="always")
@@ -726,14 +733,7 @@ def _momentum_front(x, state, raw, ws, pst, pstep, sxm, order, dt):
         v1 = s1 / (2.0 * dt) - (n20 - n02) / dt
         v2 = s2 / (2.0 * dt) - (n01 - n10) / dt
         L0, L1, L2 = _mv(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], v0, v1, v2)
-        if state[_S_PREVL_OK] != 0.0:
-            raw[3] = (L0 - state[_S_PREVL]) / dt
-            raw[4] = (L1 - state[_S_PREVL + 1]) / dt
-            raw[5] = (L2 - state[_S_PREVL + 2]) / dt
-        state[_S_PREVL] = L0
-        state[_S_PREVL + 1] = L1
-        state[_S_PREVL + 2] = L2
-        state[_S_PREVL_OK] = 1.0
+        _rate_of(state, raw, L0, L1, L2, dt)
     for k in range(_NJ):
         state[a + k] = x[_I_Q + k]
     for k in range(9):
