@@ -25,7 +25,6 @@ from grfguard.kernels.monitor import (
     N_EX,
     MonitorKernel,
     monitor_run_packed,
-    monitor_step_packed,
     split_block,
 )
 from grfguard.kernels.system import reason_text
@@ -35,7 +34,7 @@ from grfguard.model.robot import SENSOR_NAMES
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["prepare_stream", "update_dict", "run_frame", "run_blocks", "run_rows",
+__all__ = ["update_dict", "run_frame", "run_blocks", "run_rows",
            "chunk_buffers", "output_rows", "dict_to_row"]
 
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
@@ -95,16 +94,6 @@ def _pack(n: int) -> Any:
     if f is None:
         f = _PACKERS[n] = struct.Struct(f"{n}d").pack_into
     return f
-
-
-def prepare_stream(k: MonitorKernel) -> None:
-    """The streaming step's machine code for ``k`` (its entry point, ``k._entry``), loaded
-    from the cache (or compiled) without a step: ``Monitor.for_log`` calls it, so that the
-    first streamed sample costs what the others do. The monitor's state is untouched."""
-    import numba
-
-    args = (np.empty(len(k.in_cols)), np.empty(len(k.out_cols)), k.F, k.I)
-    k._entry = monitor_step_packed.compile(tuple(numba.typeof(a) for a in args))
 
 
 def update_dict(mon: Any, k: MonitorKernel, row: Any) -> dict[str, Any]:

@@ -335,9 +335,7 @@ class Monitor:
         if warm:
             k = mon._kernel()
             if k is not None:
-                from grfguard.compiled_monitor import prepare_stream
-
-                prepare_stream(k)
+                k.prepare()
         return mon
 
     def compiled_reason(self) -> str:

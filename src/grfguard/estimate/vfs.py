@@ -193,7 +193,7 @@ class VirtualForceSensor:
                 cfg = cfg.replace(dt=dt)
         vfs = cls(robot, cfg, compiled=compiled)
         if warm:
-            _prepare_step(vfs.kernel())
+            vfs.kernel().prepare()
         return vfs
 
     def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
@@ -340,16 +340,3 @@ def with_vfs_columns(log: pd.DataFrame, config: VFSConfig | None = None) -> pd.D
     for c in vfs.columns:
         out[c] = vfs[c].to_numpy()
     return out
-
-
-def _prepare_step(k: Any) -> None:
-    """The streaming step's machine code for the kernel ``k``
-    (:class:`grfguard.kernels.vfs.VFSKernel`) found without a step (loaded from the cache,
-    or compiled): the entry point its :meth:`~grfguard.kernels.vfs.VFSKernel.step` calls
-    directly. The sensor's state is untouched."""
-    import numba
-
-    from grfguard.kernels.vfs import N_OUT, vfs_step
-
-    args = (np.empty(k.n_in), np.empty(N_OUT), k.state, k.cf, k.ci, k.ws, k.iws)
-    k._entry = vfs_step.compile(tuple(numba.typeof(a) for a in args))

@@ -523,6 +523,16 @@ class MonitorKernel:
             return self.vfs_kernel.packed_args()
         return self._vargs
 
+    def prepare(self) -> None:
+        """The streaming step's machine code (its entry point, which :meth:`step` calls
+        directly) loaded from the cache, or compiled, without a step: ``Monitor.for_log``
+        calls it, so that the first streamed sample costs what the others do. The state is
+        untouched."""
+        import numba
+
+        args = (np.empty(len(self.in_cols)), np.empty(len(self.out_cols)), self.F, self.I)
+        self._entry = monitor_step_packed.compile(tuple(numba.typeof(a) for a in args))
+
     def step(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """One row (contiguous float64 arrays of the documented lengths)."""
         ep = self._entry

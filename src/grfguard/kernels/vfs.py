@@ -1504,6 +1504,16 @@ class VFSKernel:
         :func:`vfs_step` / ``X, Y`` of :func:`vfs_run`."""
         return (self.state, self.cf, self.ci, self.ws, self.iws)
 
+    def prepare(self) -> None:
+        """The streaming step's machine code (the entry point :meth:`step` calls directly)
+        loaded from the cache, or compiled, without a step
+        (``VirtualForceSensor.for_log(warm=True)``). The state is untouched."""
+        import numba
+
+        args = (np.empty(self.n_in), np.empty(N_OUT), self.state, self.cf, self.ci, self.ws,
+                self.iws)
+        self._entry = vfs_step.compile(tuple(numba.typeof(a) for a in args))
+
     def step(self, x: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
         """One sample: input row (24,) -> output row (22,) (``y`` is filled if given)."""
         if y is None:
@@ -1587,7 +1597,7 @@ def vfs_batch(log: pd.DataFrame, vfs=None) -> pd.DataFrame:
     from grfguard.estimate.vfs import VirtualForceSensor
 
     if vfs is None:
-        vfs = VirtualForceSensor.for_log(log)
+        vfs = VirtualForceSensor.for_log(log, warm=False)
     vfs.check_columns(log.columns)
     X, has_gyro, has_ref = log_to_array(log)
     k = VFSKernel(vfs, has_gyro=has_gyro, has_ref=has_ref)
