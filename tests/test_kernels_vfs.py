@@ -10,7 +10,7 @@ import pytest
 from grfguard.errors import LogFormatError
 from grfguard.estimate.config import VFSConfig
 from grfguard.estimate.vfs import VFS_OUTPUT_COLUMNS
-from grfguard.io.schema import CONTACT_REF, IMU_GYRO
+from grfguard.io.schema import CONTACT_REF, IMU_GYRO, JOINT_COLUMNS
 from grfguard.kernels import CompiledVirtualForceSensor, vfs_batch
 from grfguard.kernels.nnls import new_scratch, prior_qp
 from grfguard.model.robot import SURALP
@@ -91,6 +91,29 @@ def test_bad_samples_hold_like_python_sensor(walk):
         a, b = py.update(r), cv.update(r)
         for k in VFS_OUTPUT_COLUMNS:
             assert (np.isnan(a[k]) and np.isnan(b[k])) or abs(a[k] - b[k]) <= TOL_N, k
+
+
+def test_streaming_equals_batch_around_invalid_rows(walk):
+    # the momentum's sums come from the block only when the previous valid sample is the
+    # row before; invalid rows at a block's first and last lanes, runs of them across a
+    # block boundary and a repeated row make the samples after them compute alone
+    from grfguard.kernels.vfs import log_to_array
+
+    log = walk.iloc[:400].copy()
+    q = log.columns.get_loc(JOINT_COLUMNS[3])
+    for r in (8, 15, 16, 17, 23, 24, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 121):
+        log.iloc[r, q] = np.nan
+    log.iloc[200] = log.iloc[199]  # the same joint angles twice
+    log.loc[log.index[300], "imu_quat_w"] = np.nan  # valid angles, invalid sample
+    vfs = CompiledVirtualForceSensor.for_log(log)
+    batch = vfs.run(log).to_numpy()
+    X, _, _ = log_to_array(log)
+    vfs.reset()
+    stream = np.array([vfs.update_array(x) for x in X])
+    assert stream.tobytes() == batch.tobytes()
+    assert (batch[:, -1] == 0.0).sum() == 18  # the invalid rows
+    ref = PythonVFS.for_log(log).run(log)
+    _assert_same(ref, vfs.run(log))
 
 
 @pytest.mark.parametrize(("drop", "tol_n"), [(IMU_GYRO, 1e-5), (CONTACT_REF, TOL_N)])
