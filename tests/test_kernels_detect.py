@@ -236,6 +236,32 @@ def test_for_log_builds_the_streaming_step_before_the_first_sample(walk: pd.Data
     assert pre._row_kernel._entry is not None
 
 
+def test_for_log_loads_the_dict_call_module(tmp_path) -> None:
+    """The first dict ``update`` of a warm monitor imports nothing (the import of the dict
+    call's module took that sample about 7 ms): ``Monitor.for_log`` loads it. In a fresh
+    interpreter, where nothing has imported it yet."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from grfguard.detect import Monitor\n"
+        "from grfguard.model.robot import SURALP\n"
+        "from grfguard.sim import GaitConfig, NoiseConfig, simulate\n"
+        "log = simulate(SURALP, GaitConfig(duration=3.0), NoiseConfig(), seed=1)\n"
+        "log = log.drop(columns=[c for c in log.columns if c.startswith(('vfs_', "
+        "'com_est_', 'contact_est_', 'zmp_est'))])\n"
+        "assert 'grfguard.compiled_monitor' not in sys.modules\n"
+        "Monitor.for_log(log, warm=False)\n"
+        "assert 'grfguard.compiled_monitor' not in sys.modules\n"
+        "Monitor.for_log(log)\n"
+        "assert 'grfguard.compiled_monitor' in sys.modules\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=600, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+
+
 def test_update_array_follows_a_replaced_virtual_sensor(walk: pd.DataFrame) -> None:
     """``update_array`` keeps its compiled step after the first call (the 1 kHz path);
     a virtual sensor replaced on the monitor drops it: the rows then go through the new

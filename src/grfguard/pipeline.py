@@ -336,6 +336,7 @@ class Monitor:
             k = mon._kernel()
             if k is not None:
                 k.prepare()
+                import grfguard.compiled_monitor  # noqa: F401  (the dict call's module)
         return mon
 
     def compiled_reason(self) -> str:
