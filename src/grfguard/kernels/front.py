@@ -490,7 +490,7 @@ def _single_at(q, FB, FS, Q0, par, qcol, sb, kind, same, RX, OUT):
     alone in floats into ``OUT`` (each operation the one of a lane: the same bits)."""
     for k in range(12):
         RX[1, k] = 1.0 if (k == 0 or k == 4 or k == 8) else 0.0
-    for i in range(2, nb_of(RX)):
+    for i in range(2, _nb_of(RX)):
         c = qcol[i]
         th = q[c] - Q0[i] if c >= 0 else 0.0
         s, co = _sincos_one(th)
@@ -500,11 +500,11 @@ def _single_at(q, FB, FS, Q0, par, qcol, sb, kind, same, RX, OUT):
             _pose_unit(i, par[i], kind[i], co, s, FB, RX)
         else:
             _pose_body(i, par[i], co, s, FB, RX)
-    _outputs(nb_of(RX), FB, FS, same, sb, RX, OUT)
+    _outputs(_nb_of(RX), FB, FS, same, sb, RX, OUT)
 
 
 @njit_nort(inline="always")
-def nb_of(RX):
+def _nb_of(RX):
     """Bodies of a frames array."""
     return RX.shape[0]
 
@@ -606,8 +606,6 @@ def front_trunk(x, qprev, has_prev, cf, ci, fo, io, nb, ws, iws, shared, r0, r1,
                 KEEP[r, k] = OUT[r, k]
         for k in range(N_FRONT_Q):
             qkeep[0, k] = x[k]
-        if step == LANES:  # the lane's poses are the row's: the same bits
-            st, step = po, 1
     else:
         pstep = LANES
     _sites(ws, st, step, nb, r0, r1, r2, r3, r4, r5, r6, r7, r8, sxp)
