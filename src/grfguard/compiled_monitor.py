@@ -34,8 +34,8 @@ from grfguard.model.robot import SENSOR_NAMES
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["update_dict", "run_frame", "run_blocks", "run_rows",
-           "chunk_buffers", "output_rows", "dict_to_row"]
+__all__ = ["update_dict", "run_frame", "run_blocks", "run_rows", "chunk_buffers",
+           "output_rows", "dict_to_row"]
 
 _FLAG_COLS = tuple(f"flag_{s}" for s in SENSOR_NAMES)
 _KIND_COLS = tuple(f"kind_{s}" for s in SENSOR_NAMES)

@@ -89,9 +89,10 @@ def _ls_closed_form(rel, prior, total, sw, free, nfree, z):
         m11 += dy * dy
         r0 -= dx * prior[j]
         r1 -= dy * prior[j]
-    if (m00 * m11 - m01 * m01) < 0.01 * (m00 + m11) * (m00 + m11):
+    det = m00 * m11 - m01 * m01
+    if det < 0.01 * (m00 + m11) * (m00 + m11):
         return False
-    inv = 1.0 / (m00 * m11 - m01 * m01)
+    inv = 1.0 / det
     g0 = (m11 * r0 - m01 * r1) * inv
     g1 = (m00 * r1 - m01 * r0) * inv
     base = a * (total - sp)

@@ -242,8 +242,7 @@ def _step(x, y, state, cf, ci, ws, iws):
     front = prm[_P_FRONT_CF] != 0.0
     if front:  # the poses from the block (grfguard.kernels.front)
         p_AC0, p_AC1, p_AC2, pst, pstep = _kinematics_front(
-            x, state, prm, iprm, cf, ci, ws, iws, corner_radius, aw, ax, ay, az, sxp, sxm, pk,
-            order)
+            x, state, prm, cf, ci, ws, iws, corner_radius, aw, ax, ay, az, sxp, sxm, pk, order)
     else:
         p_AC0, p_AC1, p_AC2 = _kinematics(x, prm, iprm, tree, sites, corner_radius, aw, ax,
                                           ay, az, qpos, xpos, xquat, xmat, xipos, ximat, stc,
@@ -535,8 +534,8 @@ def _trunk_quat(prm, aw, ax, ay, az):
 
 
 @njit_nort(inline="always")
-def _kinematics_front(x, state, prm, iprm, cf, ci, ws, iws, corner_radius, aw, ax, ay, az,
-                      sxp, sxm, pk, order):
+def _kinematics_front(x, state, prm, cf, ci, ws, iws, corner_radius, aw, ax, ay, az, sxp,
+                      sxm, pk, order):
     """:func:`_kinematics` from the block of :mod:`grfguard.kernels.front` (the default
     settings): the sites and the trunk-relative CoM (3 floats) [m], then the offset and
     stride in ``ws`` of the trunk-frame sums of the angular momentum with the previous
