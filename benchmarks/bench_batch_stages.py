@@ -7,6 +7,8 @@ included, DataFrame in and out) and each stage timed alone on the same log's arr
 * SURALP: the compiled virtual force sensor alone (``vfs_run`` over the (T, 24) inputs),
   the whole compiled monitor loop (``MonitorKernel.run``: guards, VFS, detector,
   recovery, standing layer) and the rest of ``Monitor.run`` (columns in, output frame);
+  and ``Monitor.run`` with the optional layers off (:data:`LAYERS`: the standing layer,
+  the system layer, both), what each layer costs;
 * Talos: the virtual wrenches (``estimate_wrenches``: MuJoCo kinematics and inverse
   dynamics per sample, called from Python) and the channel monitor
   (``ChannelMonitor.run``).
@@ -55,13 +57,25 @@ def _min_slices(fn: Any, n: int, reps: int) -> float:
 
 def _whole(fn: Any, n: int, reps: int) -> tuple[float, float]:
     """(best wall, best CPU) µs/sample of ``fn()`` over ``reps`` runs."""
-    w = c = float("inf")
+    return _alternated({"": fn}, n, reps)[""]
+
+
+def _alternated(fns: dict[str, Any], n: int, reps: int) -> dict[str, tuple[float, float]]:
+    """:func:`_whole` of each of ``fns``, their runs alternated (each round runs every
+    one once: this machine's slow and fast phases fall on all of them alike)."""
+    best = {k: (float("inf"), float("inf")) for k in fns}
     for _ in range(reps):
-        t0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        w = min(w, (time.perf_counter() - t0) / n * 1e6)
-        c = min(c, (time.process_time() - c0) / n * 1e6)
-    return w, c
+        for k, fn in fns.items():
+            t0, c0 = time.perf_counter(), time.process_time()
+            fn()
+            w, c = (time.perf_counter() - t0) / n * 1e6, (time.process_time() - c0) / n * 1e6
+            best[k] = (min(best[k][0], w), min(best[k][1], c))
+    return best
+
+
+#: ``Monitor.for_log`` switches of the layer rows (key: what is off).
+LAYERS = {"standing": {"standing": False}, "system": {"common_mode": False},
+          "both": {"common_mode": False, "standing": False}}
 
 
 def suralp_stages(raw: pd.DataFrame, reps: int = 150) -> dict[str, float]:
@@ -90,7 +104,13 @@ def suralp_stages(raw: pd.DataFrame, reps: int = 150) -> dict[str, float]:
         "vfs": _min_slices(lambda m: vk.run(Xv[m]), n, reps),
         "kernel": _min_slices(kern, n, reps),
     }
-    out["run_wall"], out["run_cpu"] = _whole(lambda: mon.run(raw), n, 5)
+    mons = {"": mon, **{k: Monitor.for_log(raw, **kw) for k, kw in LAYERS.items()}}
+    for m_ in mons.values():
+        m_.run(raw)  # warm (the first run touches fresh memory)
+    runs = _alternated({k: (lambda m_=m_: m_.run(raw)) for k, m_ in mons.items()}, n, 5)
+    out["run_wall"], out["run_cpu"] = runs[""]
+    for k in LAYERS:
+        out[f"run_no_{k}"] = runs[k][1]
     return out
 
 
@@ -137,6 +157,13 @@ def table(s: dict[str, float], t: dict[str, float], ref_us: float) -> list[str]:
             max(s["kernel"] - s["vfs"], 1e-3), rc),
         row("SURALP", "columns in, output frame (difference)",
             max(rc - s["kernel"], 1e-3), rc),
+        row("SURALP", "`Monitor.run` without the standing layer (`standing=False`)",
+            s["run_no_standing"], rc),
+        row("SURALP", "`Monitor.run` without the system layer (`common_mode=False`: no "
+            "common-mode fit, sensor zeros, IMU corrections, twin sensor)",
+            s["run_no_system"], rc),
+        row("SURALP", "`Monitor.run` without either (virtual sensor, guards, detector, "
+            "recovery)", s["run_no_both"], rc),
         row(f"Talos ({t['joints']:.0f} joints incl. free)", "`run_described`, whole (CPU; "
             f"wall {t['run_wall']:.1f} µs)", tc, tc),
         row("Talos", "virtual wrenches (`estimate_wrenches`)", t["wrench_cpu"], tc),
