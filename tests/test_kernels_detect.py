@@ -236,6 +236,27 @@ def test_for_log_builds_the_streaming_step_before_the_first_sample(walk: pd.Data
     assert pre._row_kernel._entry is not None
 
 
+def test_prepare_builds_the_streaming_step_of_a_monitor_built_directly(walk: pd.DataFrame
+                                                                       ) -> None:
+    """A monitor built directly (``Monitor(config, vfs)``) builds its streaming step at
+    its first sample unless :meth:`Monitor.prepare` built it before; prepared or not,
+    the same bits."""
+    raw = walk.drop(columns=[c for c in walk.columns if c.startswith(
+        ("vfs_", "com_est_", "contact_est_", "zmp_est"))]).iloc[:200]
+    mons = [Monitor(MonitorConfig(), VirtualForceSensor(SURALP), robot=SURALP)
+            for _ in range(2)]
+    assert mons[0].prepare() is mons[0]
+    k = mons[0]._row_kernel
+    assert k is not None and k._entry is not None
+    assert mons[1]._row_kernel is None
+    X = np.column_stack([raw[c].to_numpy(float) if c in raw else np.full(len(raw), np.nan)
+                         for c in mons[0].input_columns])
+    got, want = (np.array([m.update_array(np.ascontiguousarray(x)) for x in X])
+                 for m in mons)
+    assert mons[0]._row_kernel is k
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+
+
 def test_for_log_loads_the_dict_call_module(tmp_path) -> None:
     """The first dict ``update`` of a warm monitor imports nothing (the import of the dict
     call's module took that sample about 7 ms): ``Monitor.for_log`` loads it. In a fresh

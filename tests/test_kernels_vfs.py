@@ -240,3 +240,19 @@ def test_for_log_builds_the_streaming_step_before_the_first_sample(walk):
     want = np.array([list(lazy.update(r).values()) for r in rows])
     assert vfs.kernel() is k
     np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+
+
+def test_prepare_builds_the_streaming_step_of_a_sensor_built_directly(walk):
+    """A sensor built directly (no log) has no streaming step until :meth:`prepare`,
+    which builds it without a sample; the outputs are those of an unprepared sensor."""
+    direct = CompiledVirtualForceSensor(SURALP)
+    assert direct._kern == {}
+    assert direct.prepare() is direct
+    k = direct._kern.get((True, True))
+    assert k is not None and k._entry is not None
+    lazy = CompiledVirtualForceSensor(SURALP)
+    rows = walk.iloc[:100].to_dict("records")
+    got = np.array([list(direct.update(r).values()) for r in rows])
+    want = np.array([list(lazy.update(r).values()) for r in rows])
+    assert direct.kernel() is k
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))

@@ -332,12 +332,20 @@ class Monitor:
         robot = _log_robot(log, vfs, robot)
         mon = cls(cfg, vfs, guard=guard, robot=robot, common_mode=common_mode,
                   standing=standing, compiled=compiled)
-        if warm:
-            k = mon._kernel()
-            if k is not None:
-                k.prepare()
-                import grfguard.compiled_monitor  # noqa: F401  (the dict call's module)
-        return mon
+        return mon.prepare() if warm else mon
+
+    def prepare(self) -> Monitor:
+        """Build the compiled streaming step now and load its machine code (and the dict
+        call's module), so that the first :meth:`update_array` or :meth:`update` takes
+        microseconds like the others; returns the monitor. :meth:`for_log` does this; a
+        monitor built directly (``Monitor(config, vfs)``) builds it at its first sample
+        instead (4-7 ms: call this before a real-time loop starts). Nothing when the
+        monitor runs the Python stages; the state is untouched."""
+        k = self._kernel()
+        if k is not None:
+            k.prepare()
+            import grfguard.compiled_monitor  # noqa: F401  (the dict call's module)
+        return self
 
     def compiled_reason(self) -> str:
         """Empty when the whole monitor runs compiled (:mod:`grfguard.kernels.monitor`:

@@ -192,9 +192,15 @@ class VirtualForceSensor:
             if np.isfinite(dt) and dt > 0 and abs(dt - cfg.dt) > 1e-9 * cfg.dt:
                 cfg = cfg.replace(dt=dt)
         vfs = cls(robot, cfg, compiled=compiled)
-        if warm:
-            vfs.kernel().prepare()
-        return vfs
+        return vfs.prepare() if warm else vfs
+
+    def prepare(self) -> VirtualForceSensor:
+        """Build the streaming step now and load its machine code, so that the first
+        :meth:`update` or :meth:`update_array` takes microseconds like the others; returns
+        the sensor. :meth:`for_log` does this; a sensor built directly builds it at its
+        first sample instead (1.4-2.8 ms). The state is untouched."""
+        self.kernel().prepare()
+        return self
 
     def kernel(self, has_gyro: bool = True, has_ref: bool = True) -> Any:
         """The compiled kernel (:class:`grfguard.kernels.vfs.VFSKernel`) for inputs with /
