@@ -416,6 +416,9 @@ def _fsum_cases() -> list[np.ndarray]:
             v[rng.random((4000, n)) < 0.3] = 0.0
             v[rng.random((4000, n)) < 0.1] *= -1e-17
         out.append(np.ascontiguousarray(v))
+    # every sign pattern of four zeros (a foot in the air; the fast path's zero sums)
+    out.append(np.array([[-0.0 if (m >> j) & 1 else 0.0 for j in range(4)]
+                         for m in range(16)]))
     return out
 
 
@@ -423,7 +426,7 @@ def test_compiled_fsum_equals_math_fsum() -> None:
     """``kernels.detect._fsum`` (TwoSum fast path, Shewchuk fallback) returns the value
     of ``math.fsum`` and the very bits of the Shewchuk kernel ``_fsum_exact`` (sign of
     zero included: for all-negative-zero input both give -0.0, where Python 3.11's
-    ``math.fsum`` gives 0.0) on 120 000 vectors."""
+    ``math.fsum`` gives 0.0) on 120 000 vectors and every sign pattern of four zeros."""
     from numba import njit
 
     from grfguard.kernels.detect import _fsum, _fsum_exact
