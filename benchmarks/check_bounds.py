@@ -10,8 +10,9 @@ common-mode layer (no twin sensor); the virtual sensor alone (batch, steps); the
 method; Talos's described monitor (its inverse dynamics in vector lanes). An index
 out of bounds raises ``IndexError`` (the run fails and names the call). Two such writes
 were found this way on 2026-11-27 (BENCHMARKS.md, "SURALP virtual sensor: kinematics
-eight samples at a time"). Not part of ``make test``: compiling everything again takes
-about three minutes of CPU (2 min 12 s wall on two cores, 2026-11-28).
+eight samples at a time"). Part of ``make test`` since 2026-11-28
+(``tests/test_boundscheck.py``): compiling everything again takes about three minutes of
+CPU (1 min 49 s wall on two cores, 2026-11-28, session 38).
 
 Usage: ``make boundscheck`` (or ``.venv/bin/python benchmarks/check_bounds.py``, which
 sets the environment and runs itself in a child process).
