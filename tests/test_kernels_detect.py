@@ -416,7 +416,7 @@ def _fsum_cases() -> list[np.ndarray]:
             v[rng.random((4000, n)) < 0.3] = 0.0
             v[rng.random((4000, n)) < 0.1] *= -1e-17
         out.append(np.ascontiguousarray(v))
-    # every sign pattern of four zeros (a foot in the air; the fast path's zero sums)
+    # every sign pattern of four zeros (a foot in the air: its corners' virtual forces)
     out.append(np.array([[-0.0 if (m >> j) & 1 else 0.0 for j in range(4)]
                          for m in range(16)]))
     return out
