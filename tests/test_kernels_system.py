@@ -154,3 +154,29 @@ def test_vibration_latching_while_the_estimator_inputs_are_missing() -> None:
                 np.testing.assert_array_equal(a.view(np.int64), b.view(np.int64), err_msg=c)
             else:
                 np.testing.assert_array_equal(a, b, err_msg=c)
+
+
+def test_sort8_and_the_fit_median_match_numpy() -> None:
+    """The branch-free sorting network sorts every 0/1 input (so every input, by the 0-1
+    principle) and random values with ties; the common-mode fit's outlier median over
+    the used residuals is ``np.median`` of them, for every use mask."""
+    import itertools
+
+    from grfguard.kernels.standing import sort8
+    from grfguard.kernels.system import _median
+
+    for bits in itertools.product((0.0, 1.0), repeat=8):
+        a = np.array(bits)
+        sort8(a)
+        assert np.array_equal(a, np.sort(bits)), bits
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        v = rng.choice([0.0, 0.5, 2.0, 1e-300, 7.25, math.inf], size=8) * rng.integers(1, 4, 8)
+        a = v.copy()
+        sort8(a)
+        assert np.array_equal(a, np.sort(v))
+    e = rng.exponential(size=8)
+    tmp = np.empty(14)
+    for mask in range(1, 256):
+        use = np.array([(mask >> i) & 1 for i in range(8)], dtype=float)
+        assert _median(e, use, tmp) == np.median(e[use != 0.0]), mask

@@ -110,17 +110,41 @@ def _shifted(sd, sp, tot):
     return max(abs(tot[0] - sd[_TOT_BASE]), abs(tot[1] - sd[_TOT_BASE + 1])) > lim
 
 
+@njit_nort(inline="always")
+def _cx(a, i, j):
+    """Compare-exchange ``a[i] <= a[j]`` without a branch (selects)."""
+    p, q = a[i], a[j]
+    lt = q < p
+    a[i] = q if lt else p
+    a[j] = p if lt else q
+
+
 @njit_nort
-def _sort8(a):
-    """Sort ``a`` (8,) in place: insertion sort (numba's ``sort`` needs its runtime, which
-    these per-sample kernels do without; same values)."""
-    for i in range(1, 8):
-        key = a[i]
-        j = i - 1
-        while j >= 0 and a[j] > key:
-            a[j + 1] = a[j]
-            j -= 1
-        a[j + 1] = key
+def sort8(a):
+    """Sort ``a`` (8,) of values that are not NaN in place (numba's ``sort`` needs its
+    runtime, which these per-sample kernels do without): Batcher's 19 compare-exchanges
+    (optimal for 8 values) in straight-line selects. Sorted values are the same whatever
+    the method; the insertion sort before it branched on the data, and those branches
+    were mispredicted (``tests/test_kernels_system.py`` checks every 0/1 input)."""
+    _cx(a, 0, 1)
+    _cx(a, 2, 3)
+    _cx(a, 4, 5)
+    _cx(a, 6, 7)
+    _cx(a, 0, 2)
+    _cx(a, 1, 3)
+    _cx(a, 4, 6)
+    _cx(a, 5, 7)
+    _cx(a, 1, 2)
+    _cx(a, 5, 6)
+    _cx(a, 0, 4)
+    _cx(a, 3, 7)
+    _cx(a, 1, 5)
+    _cx(a, 2, 6)
+    _cx(a, 1, 4)
+    _cx(a, 3, 6)
+    _cx(a, 2, 4)
+    _cx(a, 3, 5)
+    _cx(a, 3, 4)
 
 
 @njit_nort
@@ -176,7 +200,7 @@ def _det_update(sd, sp, x, v, ds, tot):
         dev_s[i] = lp - sd[_BASE + i] if math.isfinite(lp) else 0.0
         dev[i] = abs(dev_s[i])
         srt[i] = dev[i]
-    _sort8(srt)
+    sort8(srt)
     o3, o4 = srt[3], srt[4]
     t = sd[_T]
     for i in range(8):

@@ -44,7 +44,7 @@ from grfguard.kernels._jit import view1d
 from grfguard.kernels.detect import CN, CP, FLAG, G_GNEG, G_GPOS, P_CORSIG, SWN, SWP, _fsum
 from grfguard.kernels.fk import fk_sites
 from grfguard.kernels.standing import _STAGE as SD_STAGE
-from grfguard.kernels.standing import _det_reset
+from grfguard.kernels.standing import _det_reset, sort8
 from grfguard.kernels.vfs import (
     _NJ,
     _S_ANCHOR,
@@ -574,17 +574,15 @@ def _swing_to_stance(x, v, tot, cref, weight, part):
 
 @njit(inline="always")
 def _median(e, use, tmp):
-    """``np.median`` of ``e`` where ``use`` (insertion sort in ``tmp``)."""
+    """``np.median`` of ``e`` where ``use`` (at least one; the values not NaN): the used
+    values sorted in ``tmp`` (:func:`~grfguard.kernels.standing.sort8`, the others +inf
+    behind them)."""
     n = 0
     for i in range(8):
-        if use[i] != 0.0:
-            q = e[i]
-            j = n
-            while j > 0 and tmp[j - 1] > q:
-                tmp[j] = tmp[j - 1]
-                j -= 1
-            tmp[j] = q
-            n += 1
+        u = use[i] != 0.0
+        tmp[i] = e[i] if u else math.inf
+        n += 1 if u else 0
+    sort8(tmp)
     if n % 2 == 1:
         return tmp[n // 2]
     return (tmp[n // 2 - 1] + tmp[n // 2]) / 2.0
@@ -635,16 +633,18 @@ def _cm_update(yp, ys, m, v, valid0, valid1, frozen, planned, part):
         phi[3 * i + 1] = ld * yp[Y_XL + i]
         phi[3 * i + 2] = ld * yp[Y_YL + i]
         res[i] = m[i] - v[i]
-    # _drop_outlier
-    if nuse >= 3:
+    # _drop_outlier (only the fit reads ``use`` after it: nothing to drop while frozen)
+    if nuse >= 3 and not frozen:
         b0, c0 = ys[S_TH + 1], ys[S_TH + 2]
         worst = -1
+        ew = 0.0
         for i in range(8):
             if use[i] != 0.0:
                 e[i] = abs(res[i] - (ys[S_AF + i // 4] * phi[3 * i] + b0 * phi[3 * i + 1]
                                      + c0 * phi[3 * i + 2]))
-                if worst < 0 or e[i] > e[worst]:
-                    worst = i
+                take = (worst < 0) | (e[i] > ew)  # selects: no branch on the residuals
+                worst = i if take else worst
+                ew = e[i] if take else ew
         med = _median(e, use, part)
         if e[worst] > max(yp[Y_CM_OUTN], yp[Y_CM_OUTR] * med):
             use[worst] = 0.0
