@@ -13,9 +13,15 @@ included, DataFrame in and out) and each stage timed alone on the same log's arr
   dynamics per sample, called from Python) and the channel monitor
   (``ChannelMonitor.run``).
 
-Timing: the compiled stages as the minimum process CPU time over many 2,000-sample
-slices, the end-to-end runs as
-the best process CPU time (``time.process_time``) and wall time of a few whole runs. A
+Timing: every SURALP figure over the whole log, best process CPU time
+(``time.process_time``) and wall time of five runs alternated with one another (each
+round runs every one once: this machine's slow and fast phases fall on all of them
+alike); the compiled stages write into output arrays reused from run to run, as
+``Monitor.run``'s blocks are, so that none of them pays for fresh memory's page faults.
+(Until session 39 the compiled stages were the minimum over 2,000-sample slices started
+from a reset monitor: the cheapest stretch of the walk, with no sensor flagged yet,
+0.88 against 0.97-1.04 µs per sample for the whole paper run.) Talos: best of a few
+whole runs. A
 plain reference (``numpy.sort`` of 10^6 floats) is timed in the same run so that figures
 from differently loaded runs can be compared (``ratio`` columns). Pin it to one core::
 
@@ -38,21 +44,6 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import reference_us  # noqa: E402
-
-SLICE = 2_000
-
-
-def _min_slices(fn: Any, n: int, reps: int) -> float:
-    """Minimum µs/sample of ``fn(slice)`` over ``reps`` slices of :data:`SLICE` rows
-    (process CPU time: on a loaded core a wall-clock slice is rarely undisturbed)."""
-    best = float("inf")
-    for r in range(reps):
-        a = (r * 7919) % max(1, n - SLICE)
-        m = slice(a, a + SLICE)
-        t0 = time.process_time()
-        fn(m)
-        best = min(best, (time.process_time() - t0) / SLICE * 1e6)
-    return best
 
 
 def _whole(fn: Any, n: int, reps: int) -> tuple[float, float]:
@@ -78,11 +69,12 @@ LAYERS = {"standing": {"standing": False}, "system": {"common_mode": False},
           "both": {"common_mode": False, "standing": False}}
 
 
-def suralp_stages(raw: pd.DataFrame, reps: int = 150) -> dict[str, float]:
+def suralp_stages(raw: pd.DataFrame, reps: int = 5) -> dict[str, float]:
     """µs/sample of the SURALP stages (module docstring)."""
     from grfguard.detect import Monitor
     from grfguard.io.schema import CONTACT_REF, IMU_GYRO
-    from grfguard.kernels.vfs import log_to_array
+    from grfguard.kernels.monitor import N_EX, monitor_run_packed
+    from grfguard.kernels.vfs import N_OUT, log_to_array, vfs_run
 
     n = len(raw)
     mon = Monitor.for_log(raw)
@@ -95,19 +87,22 @@ def suralp_stages(raw: pd.DataFrame, reps: int = 150) -> dict[str, float]:
     vk = k.vfs_kernel
     Xv = np.ascontiguousarray(log_to_array(raw)[0])
     mon.run(raw)  # warm
+    Y, EX, Yv = np.empty((n, len(k.out_cols))), np.empty((n, N_EX)), np.empty((n, N_OUT))
 
-    def kern(m: slice) -> None:
+    def kern() -> None:  # MonitorKernel.run into the reused arrays
         k.reset()
-        k.run(X[m])
+        monitor_run_packed(X, Y, EX, k.F, k.I)
 
-    out = {
-        "vfs": _min_slices(lambda m: vk.run(Xv[m]), n, reps),
-        "kernel": _min_slices(kern, n, reps),
-    }
+    def vfs() -> None:  # VFSKernel.run into the reused array
+        vk.reset()
+        vfs_run(Xv, Yv, *vk.packed_args())
+
     mons = {"": mon, **{k: Monitor.for_log(raw, **kw) for k, kw in LAYERS.items()}}
-    for m_ in mons.values():
-        m_.run(raw)  # warm (the first run touches fresh memory)
-    runs = _alternated({k: (lambda m_=m_: m_.run(raw)) for k, m_ in mons.items()}, n, 5)
+    fns = {"vfs": vfs, "kernel": kern, **{k: (lambda m_=m_: m_.run(raw)) for k, m_ in mons.items()}}
+    for fn in fns.values():
+        fn()  # warm (the first run touches fresh memory)
+    runs = _alternated(fns, n, reps)
+    out = {"vfs": runs["vfs"][1], "kernel": runs["kernel"][1]}
     out["run_wall"], out["run_cpu"] = runs[""]
     for k in LAYERS:
         out[f"run_no_{k}"] = runs[k][1]

@@ -215,9 +215,9 @@ def main() -> None:
         "",
         *batch,
         "",
-        "Batch throughput stage by stage (`benchmarks/bench_batch_stages.py`; compiled "
-        "stages: minimum process CPU time over 2,000-sample slices; whole runs: best process "
-        "CPU time; "
+        "Batch throughput stage by stage (`benchmarks/bench_batch_stages.py`; SURALP: "
+        "best process CPU time of five whole-log runs of each, alternated, the compiled "
+        "stages into reused output arrays; Talos: best of two whole runs; "
         f"reference: `numpy.sort` of 10^6 floats, {ref_us / 1e3:.0f} ms in this run). "
         "Issue 11 targets: >= 1 M samples/s on SURALP, >= 300 k samples/s on a 30-joint "
         "robot, kinematics included:",
